@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# Installs the Debian packages drake-skill needs at run time (open3d links
+# libusb-1.0), with apt-get when running as root; otherwise says what to run.
+set -euo pipefail
+missing=()
+for pkg in libusb-1.0-0; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+done
+[ ${#missing[@]} -eq 0 ] && exit 0
+if [ "$(id -u)" -eq 0 ]; then
+    echo "Installing Debian packages: ${missing[*]}"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+else
+    echo "drake-skill needs the Debian packages: ${missing[*]}" >&2
+    echo "Run:  sudo apt-get install -y ${missing[*]}   then run make again." >&2
+    exit 1
+fi
