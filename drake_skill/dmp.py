@@ -81,8 +81,8 @@ Integration:
   batch.
 """
 
-from __future__ import annotations
-
+# No ``from __future__ import annotations``: pydrake's yaml_load_typed reads the
+# dataclass field types, which must be real types rather than strings.
 import cmath
 import functools
 import math
@@ -267,7 +267,7 @@ def validate_demonstration(times, poses, name: str = "demonstration") -> tuple[n
     if np.any(dt <= 0):
         k = int(np.argmax(dt <= 0))
         raise ValueError(
-            f"{name} times: expected strictly increasing timestamps, got t[{k}]={t[k]!r} >= t[{k + 1}]={t[k + 1]!r}"
+            f"{name} times: expected strictly increasing timestamps, got t[{k}]={float(t[k])!r} >= t[{k + 1}]={float(t[k + 1])!r}"
         )
     y[:, 3:] = as_quaternions(y[:, 3:], name=f"{name} poses[:, 3:7]", tol=UNIT_NORM_TOLERANCE)
     return t, y
@@ -282,7 +282,7 @@ def _validate_times(times, name: str = "times") -> np.ndarray:
     if not np.all(np.isfinite(t)):
         raise ValueError(f"{name}: contains NaN or inf")
     if np.any(t < 0):
-        raise ValueError(f"{name}: expected times >= 0 s from the start of the movement, min is {t.min()!r}")
+        raise ValueError(f"{name}: expected times >= 0 s from the start of the movement, min is {float(t.min())!r}")
     if np.any(np.diff(t) < 0):
         raise ValueError(f"{name}: expected non-decreasing times")
     return t

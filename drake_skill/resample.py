@@ -73,7 +73,7 @@ def resample_demonstration(
         if np.any(np.abs(step - med) > uniform_tolerance * med):
             k = int(np.argmax(np.abs(step - med)))
             raise ValueError(
-                f"times: subsampling needs uniform timestamps; step {k} is {step[k]!r} s, median {med!r} s "
+                f"times: subsampling needs uniform timestamps; step {k} is {float(step[k]):.6g} s, median {med:.6g} s "
                 f"(use method='interpolate')"
             )
         ratio = src / rate_hz

@@ -1,0 +1,1 @@
+"""Benchmarks: one module per subject, each exposing ``main(argv=None) -> int``."""

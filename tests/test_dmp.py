@@ -1,0 +1,282 @@
+"""Tests of the numpy DMP (drake_skill.dmp): fitting, integration, exploration covariance, input checks."""
+
+import math
+
+import numpy as np
+import pytest
+import scipy.linalg
+from scipy.integrate import solve_ivp
+
+from drake_skill.bench.dmp import synthetic_demonstration
+from drake_skill.dmp import (
+    Dmp,
+    DmpConfig,
+    _discrete_filter,
+    basis_centres_widths,
+    basis_features,
+    exploration_covariance,
+    fit_demonstrations,
+    fit_dmp,
+    fit_weights,
+    forcing_amplitude,
+    initial_weights,
+    integrate,
+    phase,
+)
+from drake_skill.quaternion import quaternion_distance, rotation_angle
+
+Y0 = np.array([0.0, 0.1, 0.2, 1.0, 0.0, 0.0, 0.0])
+GOAL = np.array([0.3, -0.1, 0.25, 0.8, 0.6, 0.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def demo():
+    return synthetic_demonstration(duration=5.0, rate_hz=100.0)
+
+
+def _errors(out, poses):
+    rmse = np.sqrt(np.mean(np.sum((out[:, :3] - poses[:, :3]) ** 2, axis=1)))
+    return rmse, quaternion_distance(out[:, 3:], poses[:, 3:])
+
+
+def test_config_loads_from_yaml():
+    from pydrake.common.yaml import yaml_load_typed
+
+    cfg = yaml_load_typed(schema=DmpConfig, data="n_basis: 10\nquaternion: ude\nK: 64.0\nD: 16.0\n")
+    assert (cfg.n_basis, cfg.quaternion, cfg.K, cfg.D, cfg.width_scale) == (10, "ude", 64.0, 16.0, 4.0)
+    assert cfg.weight_dim == 6
+    assert math.isclose(phase(1.0, 1.0, DmpConfig().alpha_x), 0.01)
+
+
+def test_basis_placement():
+    c, h = basis_centres_widths(5, math.log(100.0), width_scale=1.0)
+    np.testing.assert_allclose(c, np.exp(-math.log(100.0) * np.array([0, 0.25, 0.5, 0.75, 1.0])))
+    np.testing.assert_allclose(h[:4], 1.0 / np.diff(c) ** 2)
+    assert h[4] == h[3]
+    phi = basis_features(np.array([1.0, 0.5, 0.01]), c, h)
+    np.testing.assert_allclose(phi.sum(axis=1), [1.0, 0.5, 0.01])  # normalised mixture times x
+
+
+def test_reproduces_smooth_demonstration(demo):
+    times, poses = demo
+    cfg = DmpConfig(n_basis=20)
+    dmp = fit_dmp(times, poses, cfg)
+    assert dmp.weights.shape == (20, 7) and dmp.tau == pytest.approx(5.0)
+    out = integrate(dmp, cfg, times)
+    rmse, qdist = _errors(out, poses)
+    assert rmse < 1e-3  # 0.73 mm measured
+    assert qdist.max() < 0.01  # 1.2e-3 measured
+    np.testing.assert_allclose(np.linalg.norm(out[:, 3:], axis=1), 1.0, atol=1e-12)
+    # ends at the goal
+    assert np.linalg.norm(out[-1, :3] - dmp.goal[:3]) < 1e-3
+    assert quaternion_distance(out[-1, 3:], dmp.goal[3:]) < 1e-3
+    # default grid: 1 ms steps over [0, tau]
+    full = integrate(dmp, cfg)
+    assert full.shape == (5001, 7)
+    np.testing.assert_allclose(full[::10], out, atol=1e-12)
+
+
+def test_reproduces_demonstration_downsampled_to_10_hz():
+    times, poses = synthetic_demonstration(duration=5.0, rate_hz=10.0)
+    cfg = DmpConfig(n_basis=20)
+    out = integrate(fit_dmp(times, poses, cfg), cfg, times)
+    rmse, qdist = _errors(out, poses)
+    assert rmse < 1.5e-3 and qdist.max() < 0.01
+
+
+def test_fewer_bases_reproduce_worse(demo):
+    times, poses = demo
+    errs = []
+    for b in (5, 10, 20):
+        cfg = DmpConfig(n_basis=b)
+        errs.append(_errors(integrate(fit_dmp(times, poses, cfg), cfg, times), poses)[0])
+    assert errs[0] > errs[1] > errs[2]
+
+
+def test_recovers_weights_of_a_dmp_generated_trajectory():
+    rng = np.random.default_rng(0)
+    w = rng.normal(0.0, 1.0, (20, 7))
+    cfg = DmpConfig(regression="least_squares")
+    t = np.arange(3001) * 1e-3
+    y = integrate(Dmp(w, Y0, GOAL, 3.0), cfg, t, normalize_quaternion=False)
+    w_fit = fit_weights(t, y, cfg, y0=Y0, goal=GOAL)
+    assert np.abs(w_fit - w).max() < 0.03  # |w| up to 2.4; residual from numerical derivatives
+    # LWR (the thesis' regression) is exact when the weights do not vary over the bases
+    w_const = np.tile(rng.normal(0.0, 1.0, 7), (20, 1))
+    cfg_lwr = DmpConfig()
+    y = integrate(Dmp(w_const, Y0, GOAL, 3.0), cfg_lwr, t, normalize_quaternion=False)
+    w_lwr = fit_weights(t, y, cfg_lwr, y0=Y0, goal=GOAL)
+    # (0.011 on the first basis, from the one-sided second derivative at t = 0; 1.4e-4 elsewhere)
+    assert np.abs(w_lwr[1:] - w_const[1:]).max() < 1e-3
+    assert np.abs(w_lwr - w_const).max() < 0.02
+
+
+def test_integration_matches_adaptive_ode_solver():
+    rng = np.random.default_rng(1)
+    cfg = DmpConfig()
+    w = rng.normal(0.0, 1.0, (20, 7))
+    tau = 2.0
+    dmp = Dmp(w, Y0, GOAL, tau)
+    c, h = basis_centres_widths(20, cfg.alpha_x, cfg.width_scale)
+    a = forcing_amplitude(Y0, GOAL, cfg)
+
+    def rhs(t, s):
+        y, z = s[:7], s[7:]
+        f = basis_features(phase(np.array([t]), tau, cfg.alpha_x), c, h)[0] @ (w * a)
+        return np.concatenate([z / tau, (cfg.K * (GOAL - y) - cfg.D * z + f) / tau])
+
+    t_eval = np.linspace(0.0, 2.5, 26)  # also past tau
+    ref = solve_ivp(rhs, (0.0, 2.5), np.concatenate([Y0, np.zeros(7)]), t_eval=t_eval, rtol=1e-11, atol=1e-12).y[:7].T
+    out = integrate(dmp, cfg, t_eval, normalize_quaternion=False)
+    np.testing.assert_allclose(out, ref, atol=1e-8)
+    # off-grid times are interpolated linearly from the 1 ms grid: error <= h^2 max|ydd| / 8 (~2e-6 m here)
+    odd = np.array([0.0, 0.0123, 0.5004, 1.7777])
+    odd_ref = solve_ivp(rhs, (0.0, 1.7777), np.concatenate([Y0, np.zeros(7)]), t_eval=odd, rtol=1e-11, atol=1e-12).y[:7].T
+    np.testing.assert_allclose(integrate(dmp, cfg, odd, normalize_quaternion=False), odd_ref, atol=5e-6)
+
+
+def test_closed_form_discretisation_matches_expm():
+    for k, d, tau, h in [(100.0, 20.0, 5.0, 1e-3), (100.0, 20.0, 0.3, 0.01), (100.0, 5.0, 2.0, 1e-3), (100.0, 40.0, 2.0, 0.1)]:
+        m = np.zeros((3, 3))
+        m[0, 1], m[1, 0], m[1, 1], m[1, 2] = 1.0, -k / tau**2, -d / tau, 1.0 / tau**2
+        e = scipy.linalg.expm(m * h)
+        ad, bd = e[:2, :2], e[:2, 2]
+        b_ref = [0.0, bd[0], -ad[1, 1] * bd[0] + ad[0, 1] * bd[1]]
+        a_ref = [1.0, -np.trace(ad), np.linalg.det(ad)]
+        b, a = _discrete_filter(k, d, tau, h)
+        np.testing.assert_allclose(b, b_ref, rtol=1e-9)
+        np.testing.assert_allclose(a, a_ref, atol=1e-14)
+
+
+def test_batch_integration_equals_single_calls(demo):
+    times, poses = demo
+    cfg = DmpConfig()
+    dmp = fit_dmp(times, poses, cfg)
+    rng = np.random.default_rng(2)
+    samples = dmp.weights + rng.normal(0.0, 5.0, (4, 20, 7))
+    batch = integrate(dmp, cfg, times, weights=samples)
+    assert batch.shape == (4, len(times), 7)
+    for s in range(4):
+        np.testing.assert_allclose(batch[s], integrate(Dmp(samples[s], dmp.y0, dmp.goal, dmp.tau), cfg, times), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.norm(batch[..., 3:], axis=-1), 1.0, atol=1e-12)
+    assert not np.allclose(batch[0], batch[1])
+
+
+def test_degenerate_amplitude_gives_finite_fit():
+    # y returns to its start (g - y0 = 0) after a 5 cm excursion
+    t = np.linspace(0.0, 2.0, 201)
+    s = t / 2.0
+    poses = np.zeros((201, 7))
+    poses[:, 0] = 0.05 * np.sin(np.pi * s) ** 2
+    poses[:, 1] = 0.2 * (10 * s**3 - 15 * s**4 + 6 * s**5)
+    poses[:, 3] = 1.0
+    for cfg in (DmpConfig(), DmpConfig(scale_by_amplitude=False)):
+        dmp = fit_dmp(t, poses, cfg)
+        assert np.all(np.isfinite(dmp.weights))
+        out = integrate(dmp, cfg, t)
+        assert np.all(np.isfinite(out))
+        assert np.sqrt(np.mean((out[:, 0] - poses[:, 0]) ** 2)) < 1e-3
+    # the floor keeps the sign of a tiny amplitude
+    a = forcing_amplitude(np.zeros(7), np.array([1e-5, -1e-5, 0.5, 0, 0, 0, 0]), DmpConfig())
+    np.testing.assert_allclose(a[:3], [0.01, -0.01, 0.5])
+
+
+def test_ude_orientation_formulation(demo):
+    times, poses = demo
+    cfg = DmpConfig(quaternion="ude")
+    dmp = fit_dmp(times[::5], poses[::5], cfg)  # 20 Hz keeps the stepwise integration short
+    assert dmp.weights.shape == (20, 6)
+    out = integrate(dmp, cfg, times[::5])
+    rmse, qdist = _errors(out, poses[::5])
+    assert rmse < 1e-3 and qdist.max() < 0.01
+    np.testing.assert_allclose(np.linalg.norm(out[:, 3:], axis=1), 1.0, atol=1e-12)
+    batch = integrate(dmp, cfg, times[::50], weights=np.stack([dmp.weights, dmp.weights + 1.0]))
+    np.testing.assert_allclose(batch[0], out[::10], atol=1e-12)
+    assert rotation_angle(batch[1, 5, 3:], batch[0, 5, 3:]) > 1e-3
+    with pytest.raises(ValueError, match=r"weights: expected shape \(20, 6\)"):
+        integrate(dmp, cfg, weights=np.zeros((20, 7)))
+
+
+def test_demonstrations_give_spd_covariance_with_ridge():
+    demos = [synthetic_demonstration(4.0, 20.0, variant=v) for v in range(3)]
+    cfg = DmpConfig(n_basis=10)
+    fit = fit_demonstrations(demos, cfg, seed=0, ridge=0.1, floor=1e-8)
+    w = np.stack([d.weights for d in fit.dmps])
+    assert w.shape == (3, 10, 7) and fit.sigma0.shape == (10, 7, 7)
+    for b in range(10):
+        sample = np.cov(w[:, b, :], rowvar=False)
+        np.testing.assert_allclose(fit.sigma0[b], sample + 0.1 * np.diag(np.diag(sample)) + 1e-8 * np.eye(7), rtol=1e-12, atol=1e-15)
+        np.testing.assert_array_equal(fit.sigma0[b], fit.sigma0[b].T)
+        assert np.linalg.eigvalsh(fit.sigma0[b]).min() > 0
+        assert np.linalg.matrix_rank(sample) <= 2  # why the ridge is needed
+    # the initial weights are one of the fits, chosen by the seed
+    idx, w0 = initial_weights(fit.dmps, seed=0)
+    assert idx == fit.initial_index
+    np.testing.assert_array_equal(w0, fit.initial.weights)
+    picks = {initial_weights(fit.dmps, seed=s)[0] for s in range(20)}
+    assert picks == {0, 1, 2}
+    with pytest.raises(ValueError, match="demonstrations: expected at least 2"):
+        fit_demonstrations(demos[:1], cfg)
+
+
+def test_quaternion_signs_consistent_across_demonstrations():
+    times, poses = synthetic_demonstration(3.0, 20.0)
+    negated = poses.copy()
+    negated[:, 3:] *= -1.0
+    negated[7:, 3:] *= -1.0  # and a sign jump in the middle
+    fit = fit_demonstrations([(times, poses), (times, negated)], DmpConfig(n_basis=10))
+    np.testing.assert_allclose(fit.dmps[1].weights, fit.dmps[0].weights, atol=1e-9)
+    np.testing.assert_allclose(fit.sigma0, np.broadcast_to(1e-8 * np.eye(7), (10, 7, 7)), atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "mutate, match",
+    [
+        (lambda t, p: (t, np.where(np.arange(len(t))[:, None] == 4, np.nan, p)), "poses: contains NaN"),
+        (lambda t, p: (t[:2], p[:2]), "expected at least 3 samples, got 2"),
+        (lambda t, p: (t, p[:, :6]), r"poses: expected shape \(T, 7\).*got \(\d+, 6\)"),
+        (lambda t, p: (t[::-1].copy(), p), "times: expected strictly increasing"),
+        (lambda t, p: (np.where(np.arange(len(t)) == 3, t[2], t), p), "times: expected strictly increasing"),
+        (lambda t, p: (t, p * np.array([1, 1, 1, 1.2, 1.2, 1.2, 1.2])), r"quaternion at index \(0,\) has norm 1\.2"),
+        (lambda t, p: (t[:, None], p), r"times: expected shape \(T,\)"),
+    ],
+)
+def test_bad_demonstration_raises(mutate, match):
+    times, poses = synthetic_demonstration(1.0, 20.0)
+    bad_t, bad_p = mutate(times, poses)
+    with pytest.raises(ValueError, match=match):
+        fit_dmp(bad_t, bad_p, DmpConfig(n_basis=5))
+
+
+def test_bad_config_and_weights_raise():
+    times, poses = synthetic_demonstration(1.0, 20.0)
+    with pytest.raises(ValueError, match=r"DmpConfig.n_basis: expected an integer >= 2, got 1"):
+        fit_dmp(times, poses, DmpConfig(n_basis=1))
+    with pytest.raises(ValueError, match="DmpConfig.quaternion"):
+        DmpConfig(quaternion="euler").validate()
+    with pytest.raises(ValueError, match="n_basis"):
+        basis_centres_widths(1, 1.0)
+    dmp = fit_dmp(times, poses, DmpConfig(n_basis=5))
+    with pytest.raises(ValueError, match=r"weights: expected shape \(5, 7\) or \(S, 5, 7\), got \(4, 7\)"):
+        integrate(dmp, DmpConfig(n_basis=5), weights=np.zeros((4, 7)))
+    with pytest.raises(ValueError, match="weights: contain NaN"):
+        integrate(dmp, DmpConfig(n_basis=5), weights=np.full((5, 7), np.nan))
+    with pytest.raises(ValueError, match="times: expected non-decreasing"):
+        integrate(dmp, DmpConfig(n_basis=5), times=[0.0, 0.2, 0.1])
+    with pytest.raises(ValueError, match="Dmp.tau"):
+        Dmp(np.zeros((5, 7)), Y0, GOAL, 0.0)
+    with pytest.raises(ValueError, match=r"weights: expected shape \(N >= 2 fits, B, d\)"):
+        exploration_covariance(np.zeros((1, 5, 7)))
+
+
+def test_dmp_round_trips_through_arrays(tmp_path):
+    from drake_skill.fileio import atomic_save_npz, load_npz
+
+    rng = np.random.default_rng(4)
+    dmp = Dmp(rng.normal(size=(6, 7)), Y0, GOAL, 2.5)
+    atomic_save_npz(tmp_path / "dmp.npz", dmp.to_arrays("open_"))
+    back = Dmp.from_arrays(load_npz(tmp_path / "dmp.npz"), "open_")
+    np.testing.assert_array_equal(back.weights, dmp.weights)
+    assert back.tau == 2.5
+    with pytest.raises(ValueError, match="missing DMP entry 'close_weights'"):
+        Dmp.from_arrays(load_npz(tmp_path / "dmp.npz"), "close_")
