@@ -672,6 +672,7 @@ def integrate(
     ``dmp.weights``; (B, d) or a batch (S, B, d). Returns poses (T, 7) or
     (S, T, 7): xyz m + quaternion wxyz, the quaternion normalised to unit
     length unless ``normalize_quaternion`` is False (vector formulation only).
+    A batch result is a transposed view of one (T, S, 7) buffer (no copy).
     """
     config = (config or DmpConfig()).validate()
     d = config.weight_dim

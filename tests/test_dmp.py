@@ -1,5 +1,6 @@
 """Tests of the numpy DMP (drake_skill.dmp): fitting, integration, exploration covariance, input checks."""
 
+import json
 import math
 
 import numpy as np
@@ -280,3 +281,13 @@ def test_dmp_round_trips_through_arrays(tmp_path):
     assert back.tau == 2.5
     with pytest.raises(ValueError, match="missing DMP entry 'close_weights'"):
         Dmp.from_arrays(load_npz(tmp_path / "dmp.npz"), "close_")
+
+
+def test_benchmark_prints_one_json_object(capsys):
+    from drake_skill.bench.dmp import main
+
+    assert main(["--json", "--repeats", "2", "--batch", "8", "--no-orientation", "--no-mp"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert {"single_ms", "batch1000_s", "movement_primitives_single_ms"} <= set(result)
+    assert result["batch_shape"] == [8, 5001, 7] and result["movement_primitives_single_ms"] is None
+    assert 0 < result["single_ms"] < 1000 and result["reproduction"]["position_rmse_mm"] < 1.0

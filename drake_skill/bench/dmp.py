@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_skill.dmp import Dmp, DmpConfig, clear_operator_cache, fit_dmp, integrate
+from drake_skill.dmp import DmpConfig, clear_operator_cache, fit_dmp, integrate
 from drake_skill.quaternion import quat_exp, quat_multiply, rotation_angle
 
 DEFAULT_MP_VENV = Path.home() / ".cache" / "drake-skill" / "bench-venv"
@@ -183,7 +183,13 @@ def bench_movement_primitives(times, poses, n_basis: int, repeats: int, python: 
         return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def run(repeats: int = 20, batch_size: int = 1000, mp_python: str | None = None, orientation: bool = True) -> dict:
+def run(
+    repeats: int = 20,
+    batch_size: int = 1000,
+    mp_python: str | None = None,
+    orientation: bool = True,
+    movement_primitives: bool = True,
+) -> dict:
     """Runs all measurements; returns the result dict (keys in the module docstring)."""
     cfg = DmpConfig(n_basis=20)
     times, poses = synthetic_demonstration(5.0, 100.0)
@@ -204,7 +210,9 @@ def run(repeats: int = 20, batch_size: int = 1000, mp_python: str | None = None,
     del batch_out
     batch = _median_time(lambda: integrate(dmp, cfg, weights=samples), 3)
 
-    mp = bench_movement_primitives(times, poses, cfg.n_basis, max(3, repeats // 4), _mp_python(mp_python))
+    mp = None
+    if movement_primitives:
+        mp = bench_movement_primitives(times, poses, cfg.n_basis, max(3, repeats // 4), _mp_python(mp_python))
     result = {
         "single_ms": 1e3 * single,
         "single_cold_ms": 1e3 * single_cold,
@@ -215,6 +223,7 @@ def run(repeats: int = 20, batch_size: int = 1000, mp_python: str | None = None,
         "n_steps": int(len(integrate(dmp, cfg))),
         "movement_primitives_single_ms": None if mp is None else mp["single_ms"],
         "movement_primitives": mp,
+        "movement_primitives_status": "ok" if mp else ("not found" if movement_primitives else "skipped"),
         "reproduction": reproduction_errors(times, poses, cfg),
     }
     if orientation:
@@ -230,7 +239,7 @@ def _print_table(r: dict) -> None:
         (f"integrate batch of {r['batch_size']} weight samples", f"{r['batch_s']:.3f} s"),
         (
             "movement_primitives CartesianDMP.open_loop",
-            "n/a (not installed; run with --install-mp)" if mp is None else f"{mp:.1f} ms"
+            f"n/a ({r['movement_primitives_status']})" if mp is None else f"{mp:.1f} ms"
             + ("" if r["movement_primitives"]["compiled"] else " (pure Python)"),
         ),
         ("reproduction position RMSE (B=20, LWR)", f"{r['reproduction']['position_rmse_mm']:.3f} mm"),
@@ -255,18 +264,21 @@ def main(argv=None) -> int:
     parser.add_argument("--mp-python", default=None, help="python of a venv with movement_primitives")
     parser.add_argument("--install-mp", action="store_true", help=f"create {DEFAULT_MP_VENV} with movement_primitives")
     parser.add_argument("--no-orientation", action="store_true", help="skip the vector-vs-Ude comparison")
+    parser.add_argument("--no-mp", action="store_true", help="skip movement_primitives (reported as null)")
     args = parser.parse_args(argv)
     if args.repeats < 1 or args.batch < 1:
         parser.error("--repeats and --batch must be >= 1")
     mp_python = args.mp_python
     if args.install_mp:
         mp_python = install_movement_primitives()
-    result = run(args.repeats, args.batch, mp_python, orientation=not args.no_orientation)
+    result = run(
+        args.repeats, args.batch, mp_python, orientation=not args.no_orientation, movement_primitives=not args.no_mp
+    )
     if args.json:
         print(json.dumps(result))
     else:
         _print_table(result)
-        if result["movement_primitives_single_ms"] is None:
+        if result["movement_primitives_single_ms"] is None and not args.no_mp:
             print(
                 "\nmovement_primitives not found. It is not a drake-skill dependency; to compare, run\n"
                 f"  drake-skill bench dmp --install-mp     (creates {DEFAULT_MP_VENV})\n"
