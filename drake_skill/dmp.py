@@ -710,6 +710,9 @@ def _integrate_ude_orientation(dmp: Dmp, wa: np.ndarray, config: DmpConfig, h, n
     phi = basis_features(phase(np.arange(n + 1) * h, dmp.tau, config.alpha_x), c, width)  # (n+1, B)
     forcing = np.matmul(phi, wa)  # (n+1, 3) or (S, n+1, 3)
     batch = wa.shape[:-2]
+    if not batch:
+        out = _ude_steps_single(dmp.y0[3:], dmp.goal[3:], forcing, config.K, config.D, h / dmp.tau, n)
+        return _quaternion_rows(out, idx, frac)
     q = np.broadcast_to(dmp.y0[3:], batch + (4,)).copy()
     eta = np.zeros(batch + (3,))
     g = dmp.goal[3:]
@@ -722,9 +725,55 @@ def _integrate_ude_orientation(dmp: Dmp, wa: np.ndarray, config: DmpConfig, h, n
         q = quat_multiply(quat_exp(0.5 * dt_tau * eta), q)
         q /= np.linalg.norm(q, axis=-1, keepdims=True)
         out[..., k + 1, :] = q
+    return _quaternion_rows(out, idx, frac)
+
+
+def _quaternion_rows(out: np.ndarray, idx: np.ndarray, frac: np.ndarray) -> np.ndarray:
+    """Grid quaternions (..., n+1, 4) at rows idx (+ frac, normalised linear interpolation)."""
     rows = np.take(out, idx, axis=-2)
     if np.any(frac):
-        nxt = np.take(out, np.minimum(idx + 1, n), axis=-2)
+        nxt = np.take(out, np.minimum(idx + 1, out.shape[-2] - 1), axis=-2)
         rows = rows * (1.0 - frac[:, None]) + nxt * frac[:, None]
         rows /= np.linalg.norm(rows, axis=-1, keepdims=True)
     return rows
+
+
+def _ude_steps_single(q0, goal, forcing, K: float, D: float, dt_tau: float, n: int) -> np.ndarray:
+    """Same recursion as the batched loop above for one trajectory, on Python
+    floats: numpy's per-call overhead dominates for (4,)-sized arrays, and this
+    is about 6x faster. Returns (n+1, 4)."""
+    gw, gx, gy, gz = (float(v) for v in goal)
+    w, x, y, z = (float(v) for v in q0)
+    ex = ey = ez = 0.0  # eta
+    f = forcing.tolist()
+    out = np.empty((n + 1, 4))
+    out[0] = (w, x, y, z)
+    sqrt, atan2, sin, cos = math.sqrt, math.atan2, math.sin, math.cos
+    for k in range(n):
+        # r = goal * conj(q); err = 2 log(r)
+        rw = gw * w + gx * x + gy * y + gz * z
+        rx = -gw * x + gx * w - gy * z + gz * y
+        ry = -gw * y + gx * z + gy * w - gz * x
+        rz = -gw * z - gx * y + gy * x + gz * w
+        nv = sqrt(rx * rx + ry * ry + rz * rz)
+        sc = 2.0 * (atan2(nv, rw) / nv if nv > 1e-12 else 1.0 / rw)
+        fk = f[k]
+        ex += dt_tau * (K * sc * rx - D * ex + fk[0])
+        ey += dt_tau * (K * sc * ry - D * ey + fk[1])
+        ez += dt_tau * (K * sc * rz - D * ez + fk[2])
+        # q <- exp(dt/(2 tau) eta) * q
+        ax, ay, az = 0.5 * dt_tau * ex, 0.5 * dt_tau * ey, 0.5 * dt_tau * ez
+        na = sqrt(ax * ax + ay * ay + az * az)
+        s = sin(na) / na if na > 1e-8 else 1.0 - na * na / 6.0
+        c = cos(na)
+        ax, ay, az = ax * s, ay * s, az * s
+        w, x, y, z = (
+            c * w - ax * x - ay * y - az * z,
+            c * x + ax * w + ay * z - az * y,
+            c * y - ax * z + ay * w + az * x,
+            c * z + ax * y - ay * x + az * w,
+        )
+        nq = sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = w / nq, x / nq, y / nq, z / nq
+        out[k + 1] = (w, x, y, z)
+    return out

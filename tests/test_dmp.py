@@ -185,7 +185,7 @@ def test_degenerate_amplitude_gives_finite_fit():
 def test_ude_orientation_formulation(demo):
     times, poses = demo
     cfg = DmpConfig(quaternion="ude")
-    dmp = fit_dmp(times[::5], poses[::5], cfg)  # 20 Hz keeps the stepwise integration short
+    dmp = fit_dmp(times[::5], poses[::5], cfg)  # fitted at 20 Hz
     assert dmp.weights.shape == (20, 6)
     out = integrate(dmp, cfg, times[::5])
     rmse, qdist = _errors(out, poses[::5])
