@@ -1,2 +1,62 @@
-def main(argv=None):
-    raise SystemExit("not yet")
+"""``drake-skill``: the command line.
+
+Subcommands (``drake-skill <command> --help`` for each):
+
+  station-demo   scripted Open, Close and Draw in the simulated station
+  bench NAME     benchmarks: station, dmp, perception, reward (``--json``)
+
+Every subcommand's module has a ``main(argv) -> int``; this file only
+dispatches, so ``--help`` texts live beside the code they describe.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+COMMANDS = {
+    "station-demo": ("drake_skill.station_demo", "scripted Open/Close/Draw in the simulated station"),
+    "bench": (None, "benchmarks: station, dmp, perception, reward"),
+}
+BENCHES = ("station", "dmp", "perception", "reward")
+
+
+def _usage() -> str:
+    lines = ["usage: drake-skill <command> [options]", "", "Robot skill learning from very few "
+             "demonstrations, as a Drake diagram.", "", "commands:"]
+    lines += [f"  {name:<14}{text}" for name, (_, text) in COMMANDS.items()]
+    lines += ["", "Run 'drake-skill <command> --help' for a command's options."]
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help"):
+        print(_usage())
+        return 0
+    if argv[0] in ("-V", "--version"):
+        from drake_skill import __version__
+        print(__version__)
+        return 0
+    command, rest = argv[0], argv[1:]
+    if command not in COMMANDS:
+        print(f"drake-skill: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
+        return 2
+    if command == "bench":
+        if not rest or rest[0] in ("-h", "--help"):
+            print(f"usage: drake-skill bench {{{','.join(BENCHES)}}} [--json] [options]\n\n"
+                  "Benchmarks print a short table, or one JSON object with --json.\n"
+                  "'drake-skill bench NAME --help' describes what NAME measures.")
+            return 0
+        if rest[0] not in BENCHES:
+            print(f"drake-skill bench: unknown benchmark {rest[0]!r}; choose from {', '.join(BENCHES)}",
+                  file=sys.stderr)
+            return 2
+        module = importlib.import_module(f"drake_skill.bench.{rest[0]}")
+        return int(module.main(rest[1:]) or 0)
+    module = importlib.import_module(COMMANDS[command][0])
+    return int(module.main(rest) or 0)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

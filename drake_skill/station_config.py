@@ -1,12 +1,14 @@
 """Station configuration: dataclasses loadable from YAML with ``yaml_load_typed``.
 
+(No ``from __future__ import annotations`` here: yaml_load_typed reads the
+field types at run time.)
+
 A scenario file names the object on the table, the camera, the controller and
 the success thresholds; code never hard-codes them. Units are SI (m, rad, s).
 ``load_station_config`` turns every problem into a ``ValueError`` that names
 the offending field.
 """
 
-from __future__ import annotations
 
 import dataclasses as dc
 import math

@@ -1,0 +1,166 @@
+"""The simulated station: models, control accuracy, camera, scripted skills, reset, config errors."""
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import MultibodyPlant
+
+from drake_skill.models import add_package_paths, model_url
+from drake_skill.pose_source import hold_plan
+from drake_skill.scripted import scripted_plan
+from drake_skill.simulation import StationSimulation
+from drake_skill.station_config import StationConfig, load_station_config, scenario_for_skill
+from drake_skill.success import judge_success
+
+
+def _no_camera(skill):
+    config = scenario_for_skill(skill)
+    config.enable_camera = False
+    return config
+
+
+@pytest.fixture(scope="module")
+def open_sim():
+    return StationSimulation(_no_camera("open"))
+
+
+@pytest.mark.parametrize("filename", ["panda_arm.sdf", "panda_hand.sdf", "table.sdf", "box.sdf", "drawer.sdf"])
+def test_models_parse_without_warnings(filename, caplog):
+    plant = MultibodyPlant(0.001)
+    parser = Parser(plant)
+    add_package_paths(parser.package_map())
+    parser.SetStrictParsing()  # warnings become errors
+    assert parser.AddModels(url=model_url(filename))
+    plant.Finalize()
+
+
+def test_panda_kinematics_match_published_values():
+    """At q = 0 Franka's flange is at (0.088, 0, 0.926) m."""
+    from drake_skill.ee_controller import make_control_plant
+    plant = make_control_plant()
+    context = plant.CreateDefaultContext()
+    X = plant.CalcRelativeTransform(context, plant.world_frame(), plant.GetFrameByName("panda_link8"))
+    np.testing.assert_allclose(X.translation(), [0.088, 0.0, 0.926], atol=1e-6)
+
+
+@pytest.mark.parametrize("offset,rpy", [
+    ([0.10, 0.05, -0.10], [0.0, 0.0, 0.0]),
+    ([0.15, -0.10, -0.15], [0.0, 0.3, 0.0]),
+    ([0.05, 0.15, 0.05], [0.2, 0.0, 0.4]),
+])
+def test_hand_reaches_commanded_pose(open_sim, offset, rpy):
+    open_sim.reset(0)
+    home = open_sim.home_pose()
+    target = RigidTransform(RollPitchYaw(rpy).ToRotationMatrix() @ home.rotation(),
+                            home.translation() + offset)
+    open_sim.run(hold_plan(target), duration=2.5, record_hz=10)
+    X = open_sim.ee_pose()
+    position_error = np.linalg.norm(X.translation() - target.translation())
+    angle_error = np.degrees(abs((X.rotation().inverse() @ target.rotation()).ToAngleAxis().angle()))
+    assert position_error < 0.005, f"position error {position_error * 1000:.1f} mm"
+    assert angle_error < 2.0, f"orientation error {angle_error:.2f} deg"
+
+
+@pytest.mark.parametrize("skill", ["open", "close", "draw"])
+def test_scripted_motion_succeeds_and_parked_fails(skill):
+    sim = StationSimulation(_no_camera(skill))
+    for seed in (0, 7):
+        X_WO = sim.reset(seed)
+        plan = scripted_plan(skill, X_WO, sim.home_pose())
+        log = sim.run(plan, plan.duration + 0.5, record_hz=20)
+        assert sim.judge(skill), f"{skill} seed {seed}: final object state {log.final_object_state:.3f}"
+        assert judge_success(skill, log.final_object_state, sim.config.success)
+    sim.reset(3)
+    log = sim.run(None, 4.0, record_hz=10)   # the hand holds its home pose
+    assert not sim.judge(skill), f"{skill} judged a success with the arm parked"
+    assert np.ptp(log.object_state) < 1e-6
+
+
+def test_reset_is_bit_identical_for_a_seed(open_sim):
+    def rollout(seed):
+        X_WO = open_sim.reset(seed)
+        plan = scripted_plan("open", X_WO, open_sim.home_pose())
+        log = open_sim.run(plan, 4.5, record_hz=50)
+        return np.c_[log.ee_pose, log.q, log.object_state]
+
+    a, b, c = rollout(11), rollout(11), rollout(12)
+    assert np.array_equal(a, b)
+    assert not np.allclose(a, c)
+    assert open_sim.reset(11).IsExactlyEqualTo(open_sim.reset(11))
+
+
+@pytest.fixture(scope="module")
+def camera_sim():
+    return StationSimulation(scenario_for_skill("open"))
+
+
+def _blue(rgb):
+    r, g, b = (rgb[i].astype(int) for i in range(3))
+    return (b > 80) & (b > 2 * r) & (b > 1.5 * g)
+
+
+def test_camera_sees_blue_object_and_table(camera_sim):
+    camera_sim.reset(0)
+    station, context = camera_sim.station, camera_sim.station_context()
+    cloud = station.GetOutputPort("point_cloud").Eval(context)
+    xyz, rgb = cloud.xyzs(), cloud.rgbs()
+    valid = np.isfinite(xyz).all(axis=0)
+    blue = _blue(rgb) & valid
+    assert blue.sum() > 5000, "too few blue points"
+    # Blue points lie on the box: inside its footprint around X_WO, below 16 cm.
+    p_OP = camera_sim.X_WO.inverse().multiply(xyz[:, blue])
+    assert np.all(np.abs(p_OP[0]) < 0.13) and np.all(np.abs(p_OP[1]) < 0.16)
+    assert np.all((p_OP[2] > -0.005) & (p_OP[2] < 0.16))
+    # Table points (z ~ 0, not blue) are plentiful.
+    table = valid & ~blue & (np.abs(xyz[2]) < 0.003)
+    assert table.sum() > 50000
+    # The label image agrees: box body and lid pixels are the blue pixels.
+    labels = station.GetOutputPort("label_image").Eval(context).data[:, :, 0].ravel()
+    plant = station.plant
+    box_labels = [int(plant.GetBodyByName(n).index()) for n in ("box_base", "box_lid")]
+    in_box = np.isin(labels, box_labels)
+    assert in_box.sum() > 5000
+    iou = (in_box & blue).sum() / (in_box | blue).sum()
+    assert iou > 0.95
+    assert (labels == int(plant.GetBodyByName("table_top").index())).sum() > 50000
+
+
+def test_images_have_kinect_shape(camera_sim):
+    camera_sim.reset(0)
+    context = camera_sim.station_context()
+    color = camera_sim.station.GetOutputPort("color_image").Eval(context)
+    depth = camera_sim.station.GetOutputPort("depth_image").Eval(context)
+    assert (color.width(), color.height()) == (640, 480)
+    d = depth.data[:, :, 0]
+    finite = d[np.isfinite(d)]
+    assert finite.min() >= 0.5 and finite.max() <= 4.0
+
+
+def test_object_state_port_reports_lid_angle():
+    config = _no_camera("close")
+    sim = StationSimulation(config)
+    assert sim.object_state() == pytest.approx(config.object.initial_joint)
+
+
+@pytest.mark.parametrize("yaml_text,field", [
+    ("object: {kind: teapot}", "object.kind"),
+    ("camera: {width: 0, height: 480}", "camera.width"),
+    ("camera: {width: 100000}", "camera.width"),
+    ("time_stepp: 0.001", "time_stepp"),
+    ("object: {initial_joint: 5.0}", "object.initial_joint"),
+    ("q_home: [0, 0, 0]", "q_home"),
+])
+def test_bad_config_names_the_field(yaml_text, field):
+    with pytest.raises(ValueError, match=field.replace(".", r"\.")):
+        load_station_config(data=yaml_text)
+
+
+def test_config_yaml_round_trip(tmp_path):
+    path = tmp_path / "scenario.yaml"
+    path.write_text("time_step: 0.001\nobject:\n  kind: drawer\n  x: 0.68\ncamera:\n  fps: 5.0\n")
+    config = load_station_config(path)
+    assert config.object.kind == "drawer" and config.time_step == 0.001 and config.camera.fps == 5.0
+    assert config.camera.width == StationConfig().camera.width
+    with pytest.raises(FileNotFoundError, match="nope.yaml"):
+        load_station_config(tmp_path / "nope.yaml")
