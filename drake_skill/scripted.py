@@ -60,7 +60,10 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
         tip_offset = (TCP_TO_TIP * z_E + FINGER_HALF_THICKNESS * x_E)[[0, 2]]  # TCP -> tip's upper edge
         radius, push = 0.209, 0.010
         under_lip = _xyz(np.array([-0.109, 0.123]) - tip_offset)
-        frames += [(2.5, under_lip + [-0.06, 0.0, 0.06], R, 0.0),
+        # Turn the hand at height first: descending while turning folds the
+        # elbow into joint 4's limit.
+        frames += [(1.5, under_lip + [0.0, 0.0, 0.16], R, 0.0),
+                   (2.5, under_lip + [-0.05, 0.0, 0.05], R, 0.0),
                    (3.5, under_lip, R, 0.0)]
         for i, theta in enumerate(np.linspace(0.0, 1.55, 9)[1:]):
             contact = _arc(theta, radius) + push * np.array([np.sin(theta), np.cos(theta)])

@@ -193,7 +193,12 @@ def scenario_for_skill(skill: str) -> StationConfig:
     if skill not in SKILLS:
         raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
     config = StationConfig()
-    if skill == "close":
+    # The box sits further away for Open than for Close: lifting the lip from
+    # the front needs the arm stretched, reaching behind the open lid needs it
+    # closer (the Panda's joint 4 and 6 limits bound both).
+    if skill == "open":
+        config.object.x = 0.62
+    elif skill == "close":
         config.object.initial_joint = 1.9
     elif skill == "draw":
         config.object.kind = "drawer"
