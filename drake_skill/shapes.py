@@ -30,7 +30,6 @@ at z = 0, object resting on it near the origin):
 so a dataset is reproducible and any slice can be generated alone.
 """
 
-from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
@@ -71,7 +70,7 @@ class DepthCameraConfig:
     """From here to ``max_incidence_deg`` the chance of a missing return rises linearly to 1."""
     dropout: float = 0.02
     """Probability that any pixel returns nothing."""
-    axial_noise_m: tuple[float, float, float] = (0.0012, 0.0019, 0.4)
+    axial_noise_m: list[float] = field(default_factory=lambda: [0.0012, 0.0019, 0.4])
     """sigma_z = a + b (z - c)^2 (m), Nguyen et al. 2012."""
     lateral_noise_px: float = 0.3
     """Std of the pixel jitter applied before back-projection."""
@@ -91,8 +90,8 @@ class DepthCameraConfig:
 class ViewConfig:
     """Where :func:`random_camera_pose` puts the camera."""
 
-    distance_m: tuple[float, float] = (1.0, 2.0)
-    elevation_deg: tuple[float, float] = (20.0, 65.0)
+    distance_m: list[float] = field(default_factory=lambda: [1.0, 2.0])
+    elevation_deg: list[float] = field(default_factory=lambda: [20.0, 65.0])
     look_at_jitter_m: float = 0.03
     roll_deg: float = 3.0
 
@@ -373,8 +372,9 @@ def look_at(eye, target, roll_rad: float = 0.0) -> np.ndarray:
     return X
 
 
-def random_camera_pose(rng: np.random.Generator, target, view: ViewConfig = ViewConfig()) -> np.ndarray:
+def random_camera_pose(rng: np.random.Generator, target, view: ViewConfig | None = None) -> np.ndarray:
     """A camera pose X_WC (4x4) on the upper hemisphere around ``target`` (see :class:`ViewConfig`)."""
+    view = view if view is not None else ViewConfig()
     dist = rng.uniform(*view.distance_m)
     el = math.radians(rng.uniform(*view.elevation_deg))
     az = rng.uniform(0.0, 2.0 * math.pi)
@@ -384,9 +384,11 @@ def random_camera_pose(rng: np.random.Generator, target, view: ViewConfig = View
     return look_at(eye, aim, math.radians(rng.normal(0.0, view.roll_deg)))
 
 
-def render_depth_points(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, camera: DepthCameraConfig = DepthCameraConfig(), noise: bool = True) -> np.ndarray:
+def render_depth_points(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, camera: DepthCameraConfig | None = None, noise: bool = True) -> np.ndarray:
     """Points (M, 3) in W that the depth camera at X_WC sees on ``mesh`` (one per pixel, see module docstring)."""
     import open3d as o3d
+
+    camera = camera if camera is not None else DepthCameraConfig()
 
     v, f = mesh
     X_WC = np.asarray(X_WC, dtype=np.float64)
@@ -436,8 +438,9 @@ def render_depth_points(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, 
     return p_C @ R_WC.T + p_WC
 
 
-def partial_view_cloud(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, config: CloudConfig = CloudConfig(), noise: bool = True) -> np.ndarray:
+def partial_view_cloud(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, config: CloudConfig | None = None, noise: bool = True) -> np.ndarray:
     """Rendered, table-cut and resampled cloud (n_points, 3) in W; raises ValueError if the view has < min_points points."""
+    config = config if config is not None else CloudConfig()
     pts = render_depth_points(mesh, X_WC, rng, config.camera, noise)
     if noise and rng.random() < config.table_cut_probability:
         keep = pts[:, 2] > rng.uniform(0.0, config.table_cut_max_m)
@@ -448,8 +451,9 @@ def partial_view_cloud(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, c
     return resample_points(pts, config.n_points, rng).astype(np.float32)
 
 
-def random_cloud(rng: np.random.Generator, config: CloudConfig = CloudConfig(), kind: str | None = None) -> tuple[np.ndarray, dict]:
+def random_cloud(rng: np.random.Generator, config: CloudConfig | None = None, kind: str | None = None) -> tuple[np.ndarray, dict]:
     """One random shape seen from one random viewpoint: ((n_points, 3) float32 in W, info)."""
+    config = config if config is not None else CloudConfig()
     for _ in range(20):
         mesh, info = random_shape(rng, kind)
         lo, hi = mesh[0].min(axis=0), mesh[0].max(axis=0)
@@ -461,11 +465,12 @@ def random_cloud(rng: np.random.Generator, config: CloudConfig = CloudConfig(), 
     raise RuntimeError("random_cloud: 20 draws in a row gave too few visible points; check CloudConfig")
 
 
-def generate_clouds(n: int, seed: int, config: CloudConfig = CloudConfig(), start: int = 0, progress: bool = False) -> tuple[np.ndarray, list[str]]:
+def generate_clouds(n: int, seed: int, config: CloudConfig | None = None, start: int = 0, progress: bool = False) -> tuple[np.ndarray, list[str]]:
     """Clouds ``start .. start+n-1`` of the dataset with this seed: ((n, n_points, 3) float32, kinds).
 
     Sample i uses ``np.random.default_rng([seed, i])`` only, so slices agree with a full run.
     """
+    config = config if config is not None else CloudConfig()
     if n < 0:
         raise ValueError(f"n: expected >= 0, got {n}")
     out = np.empty((n, config.n_points, 3), dtype=np.float32)
@@ -482,7 +487,7 @@ def generate_clouds(n: int, seed: int, config: CloudConfig = CloudConfig(), star
     return out, kinds
 
 
-def lidded_box_view(lid_angle_rad: float, rng: np.random.Generator, size=(0.20, 0.30, 0.15), p_WO=(0.0, 0.0, 0.0), yaw_rad: float = 0.0, camera_position=(1.3, 0.0, 0.7), config: CloudConfig = CloudConfig(), noise: bool = True) -> np.ndarray:
+def lidded_box_view(lid_angle_rad: float, rng: np.random.Generator, size=(0.20, 0.30, 0.15), p_WO=(0.0, 0.0, 0.0), yaw_rad: float = 0.0, camera_position=(1.3, 0.0, 0.7), config: CloudConfig | None = None, noise: bool = True) -> np.ndarray:
     """The thesis' lidded box seen by a fixed camera: cloud (n_points, 3) in W.
 
     The box (depth x 0.20, width y 0.30, height z 0.15 m by default; front

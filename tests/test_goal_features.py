@@ -1,0 +1,121 @@
+"""Tests for drake_skill.goal_features (per-skill PCA of PCAE codes, METHOD.md 3)."""
+
+import numpy as np
+import pytest
+
+from drake_skill.fileio import atomic_save_npz, load_npz
+from drake_skill.goal_features import GoalFeatures, GoalFeaturesConfig
+
+
+def _codes(seed=0, t=60, d=128, rank=5):
+    """Codes with a dominant rank-``rank`` structure plus small noise."""
+    rng = np.random.default_rng(seed)
+    z = rng.normal(size=(t, rank)) * np.linspace(3.0, 1.0, rank)
+    basis = rng.normal(size=(rank, d))
+    return z @ basis + 0.01 * rng.normal(size=(t, d)) + rng.uniform(0, 2, size=d)
+
+
+def test_fit_transform_shapes_and_variance():
+    x = _codes()
+    gf = GoalFeatures(8).fit(x)
+    assert gf.mean_.shape == (128,)
+    assert gf.components_.shape == (8, 128)
+    assert gf.explained_variance_.shape == (8,)
+    assert gf.n_samples_ == 60
+    # Orthonormal components.
+    np.testing.assert_allclose(gf.components_ @ gf.components_.T, np.eye(8), atol=1e-10)
+    # Rank-5 signal: 5 components explain almost all variance, the rest little.
+    assert gf.total_explained_variance_ratio > 0.999
+    assert gf.explained_variance_ratio_[:5].sum() > 0.999
+    assert np.all(np.diff(gf.explained_variance_) <= 1e-12)
+    g = gf.transform(x)
+    assert g.shape == (60, 8)
+    assert gf.transform(x[3]).shape == (8,)
+    np.testing.assert_allclose(gf.transform(x[3]), g[3])
+    # Projections are centred and their variances are the explained variances.
+    np.testing.assert_allclose(g.mean(axis=0), 0.0, atol=1e-9)
+    np.testing.assert_allclose(g.var(axis=0, ddof=1), gf.explained_variance_, rtol=1e-9)
+    # Reconstruction from 8 components is near exact for rank-5 data.
+    np.testing.assert_allclose(gf.inverse_transform(g), x, atol=0.1)
+
+
+def test_matches_scikit_learn_up_to_sign():
+    from sklearn.decomposition import PCA
+
+    x = _codes(seed=3, rank=12)
+    gf = GoalFeatures(8).fit(x)
+    sk = PCA(8).fit(x)
+    np.testing.assert_allclose(gf.explained_variance_, sk.explained_variance_, rtol=1e-8)
+    np.testing.assert_allclose(gf.explained_variance_ratio_, sk.explained_variance_ratio_, rtol=1e-8)
+    np.testing.assert_allclose(np.abs(gf.transform(x)), np.abs(sk.transform(x)), atol=1e-8)
+
+
+def test_list_of_demonstrations_and_sign_convention():
+    x = _codes(seed=1, t=90)
+    a = GoalFeatures().fit([x[:30], x[30:55], x[55:]], lengths=[30, 25, 35])
+    b = GoalFeatures().fit(x)
+    np.testing.assert_array_equal(a.components_, b.components_)
+    # Sign fixed: the largest-magnitude entry of each component is positive.
+    idx = np.argmax(np.abs(a.components_), axis=1)
+    assert np.all(a.components_[np.arange(8), idx] > 0)
+    # Same fit after flipping the data's sign pattern -> same components (deterministic).
+    c = GoalFeatures().fit(x[::-1])
+    np.testing.assert_allclose(c.components_, b.components_, atol=1e-10)
+
+
+def test_round_trip_via_arrays_and_npz(tmp_path):
+    x = _codes(seed=2)
+    gf = GoalFeatures().fit(x)
+    arrays = gf.to_arrays()
+    assert set(arrays) == set(GoalFeatures.ARRAY_KEYS)
+    back = GoalFeatures.from_arrays(arrays)
+    np.testing.assert_array_equal(back.transform(x), gf.transform(x))
+    atomic_save_npz(tmp_path / "pca.npz", arrays)
+    again = GoalFeatures.from_arrays(load_npz(tmp_path / "pca.npz"))
+    np.testing.assert_array_equal(again.transform(x), gf.transform(x))
+    assert again.n_samples_ == 60
+    assert again.total_explained_variance_ratio == pytest.approx(gf.total_explained_variance_ratio)
+
+
+def test_config_yaml():
+    from pydrake.common.yaml import yaml_load_typed
+
+    cfg = yaml_load_typed(schema=GoalFeaturesConfig, data="n_components: 6\n")
+    assert GoalFeatures.from_config(cfg).n_components == 6
+
+
+@pytest.mark.parametrize(
+    "codes, match",
+    [
+        (np.zeros((20, 127)), r"codes: expected shape \(T, 128\), got \(20, 127\)"),
+        (np.zeros(128), r"codes: expected shape \(T, 128\), got \(128,\)"),
+        (np.zeros((8, 128)), r"need more than n_components=8 samples to fit, got 8"),
+        (np.full((20, 128), np.nan), r"codes: contains NaN"),
+        ([], r"at least one demonstration"),
+        ([np.zeros((10, 128)), np.zeros((10, 3))], r"codes\[1\]: expected shape"),
+    ],
+)
+def test_fit_errors(codes, match):
+    with pytest.raises(ValueError, match=match):
+        GoalFeatures().fit(codes)
+
+
+def test_other_errors():
+    with pytest.raises(ValueError, match="n_components"):
+        GoalFeatures(0)
+    with pytest.raises(ValueError, match="not fitted"):
+        GoalFeatures().transform(np.zeros((3, 128)))
+    gf = GoalFeatures().fit(_codes())
+    with pytest.raises(ValueError, match=r"codes: expected shape \(T, 128\), got \(3, 64\)"):
+        gf.transform(np.zeros((3, 64)))
+    with pytest.raises(ValueError, match=r"lengths: sum 10"):
+        GoalFeatures().fit(_codes(), lengths=[5, 5])
+    arrays = gf.to_arrays()
+    with pytest.raises(ValueError, match=r"missing \['mean'\]"):
+        GoalFeatures.from_arrays({k: v for k, v in arrays.items() if k != "mean"})
+    bad = dict(arrays, mean=np.zeros(100))
+    with pytest.raises(ValueError, match=r"arrays\['mean'\]: expected shape \(128,\), got \(100,\)"):
+        GoalFeatures.from_arrays(bad)
+    bad = dict(arrays, components=np.zeros((8,)))
+    with pytest.raises(ValueError, match=r"arrays\['components'\]"):
+        GoalFeatures.from_arrays(bad)
