@@ -1,0 +1,231 @@
+"""Goal HMM: state-count selection, robustness of Baum-Welch, inference vs hmmlearn."""
+
+import json
+
+import numpy as np
+import pytest
+from hmmlearn.hmm import GaussianHMM
+from pydrake.common.yaml import yaml_load_typed
+
+from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
+from drake_skill.fileio import atomic_save_npz, atomic_write_json, load_npz
+from drake_skill.goal_model import (
+    GoalHMM,
+    GoalModelConfig,
+    forward_backward,
+    n_free_parameters,
+    viterbi,
+)
+
+LENGTHS = [50, 60, 45]
+
+
+def _data(k, seed, lengths=LENGTHS):
+    model = left_to_right_model(n_states=k, seed=seed)
+    X, lengths = sample_demonstrations(model, lengths, seed=seed)
+    return model, X, lengths
+
+
+def _reference(gm: GoalHMM) -> GaussianHMM:
+    ref = GaussianHMM(n_components=gm.n_states_, covariance_type="full", init_params="")
+    ref.startprob_, ref.transmat_, ref.means_, ref.covars_ = gm.startprob_, gm.transmat_, gm.means_, gm.covars_
+    return ref
+
+
+@pytest.fixture(scope="module")
+def fitted4():
+    model, X, lengths = _data(4, 0)
+    return model, X, lengths, GoalHMM(random_state=0).fit(X, lengths)
+
+
+def _match(gm, true_means):
+    """Fitted state nearest to each true state's mean, and the distances."""
+    dist = np.linalg.norm(gm.means_[:, None, :] - true_means[None, :, :], axis=2)  # (fitted, true)
+    return dist.argmin(axis=0), dist.min(axis=0)
+
+
+@pytest.mark.parametrize("k_true", [3, 6])
+def test_aic_picks_true_state_count(k_true):
+    # Default criterion (AIC), default range 2..8, diag and full: 3 seeds each.
+    chosen = []
+    for seed in range(3):
+        _, X, lengths = _data(k_true, seed)
+        chosen.append(GoalHMM(random_state=seed).fit(X, lengths).n_states_)
+    assert chosen == [k_true] * 3
+
+
+def test_fit_finds_states_terminal_and_structure(fitted4):
+    model, X, lengths, gm = fitted4
+    _, _, true_means, _ = model
+    assert gm.n_states_ == 4
+    assert gm.covariance_type_ in ("diag", "full")
+    nearest, dist = _match(gm, true_means)
+    assert sorted(nearest) == [0, 1, 2, 3] and dist.max() < 0.1
+    # The one terminal state is the fitted copy of the true absorbing state.
+    assert gm.terminal_states_.tolist() == [nearest[-1]]
+    assert gm.startprob_[nearest[0]] > 0.99
+    # Left to right: each state mostly stays or moves to the next true state.
+    for a, b in zip(nearest[:-1], nearest[1:]):
+        assert gm.transmat_[a, a] + gm.transmat_[a, b] > 0.98
+    assert gm.converged_ and 0 <= gm.restart_ < 4
+    ok = [r for r in gm.criterion_table_ if r["status"] == "ok"]
+    best = min(ok, key=lambda r: r["aic"])
+    assert (best["k"], best["covariance_type"]) == (gm.n_states_, gm.covariance_type_)
+    assert gm.loglik_per_step_.shape == (3,)
+    assert np.isclose(gm.log_likelihood_, gm.score(X, lengths))
+
+
+def test_parameter_counts():
+    # start k-1, transitions k(k-1), means k d, covariances by type.
+    assert n_free_parameters(3, 8, "diag") == 2 + 6 + 24 + 24
+    assert n_free_parameters(3, 8, "full") == 2 + 6 + 24 + 3 * 36
+    assert n_free_parameters(3, 8, "spherical") == 2 + 6 + 24 + 3
+    assert n_free_parameters(3, 8, "tied") == 2 + 6 + 24 + 36
+    with pytest.raises(ValueError, match="covariance_type"):
+        n_free_parameters(3, 8, "banana")
+
+
+def test_bic_is_an_option(fitted4):
+    _, X, lengths, gm = fitted4
+    bic = GoalHMM(criterion="bic", random_state=0).fit(X, lengths)
+    assert bic.n_states_ == 4
+    rows = [r for r in bic.criterion_table_ if r["status"] == "ok"]
+    assert min(rows, key=lambda r: r["bic"])["k"] == 4
+    row = rows[0]
+    assert np.isclose(row["bic"], -2 * row["log_likelihood"] + row["n_params"] * np.log(sum(lengths)))
+    assert np.isclose(row["aic"], -2 * row["log_likelihood"] + 2 * row["n_params"])
+
+
+def test_fit_is_deterministic():
+    _, X, lengths = _data(3, 5)
+    kw = dict(n_states_max=5, n_restarts=3, random_state=7)
+    a, b = GoalHMM(**kw).fit(X, lengths), GoalHMM(**kw).fit(X, lengths)
+    for name in ("startprob_", "transmat_", "means_", "covars_", "terminal_states_"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    assert a.criterion_table_ == b.criterion_table_
+
+
+def test_fit_never_fails_on_few_short_sequences():
+    # 20 seeds of 2-3 short, unstructured sequences (random walks of varied
+    # scale); hmmlearn's own random init gives NaN start probabilities on some.
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        lengths = rng.integers(8, 20, size=rng.integers(2, 4))
+        X = np.cumsum(rng.normal(0, rng.uniform(0.02, 0.5), (lengths.sum(), 8)), axis=0)
+        gm = GoalHMM(n_states_max=5, n_restarts=2, random_state=seed).fit(X, lengths)
+        k = gm.n_states_
+        assert 2 <= k <= min(5, lengths.min())
+        for a in (gm.startprob_, gm.transmat_, gm.means_, gm.covars_):
+            assert np.all(np.isfinite(a))
+        assert np.isclose(gm.startprob_.sum(), 1) and np.allclose(gm.transmat_.sum(axis=1), 1)
+        assert np.all(np.linalg.eigvalsh(gm.covars_) > 0)
+        assert len(gm.terminal_states_) >= 1
+        assert np.isfinite(gm.score(X, lengths))
+
+
+def test_constant_feature_is_regularised():
+    # A feature that never changes: without an M-step prior its variance is 0.
+    _, X, lengths = _data(3, 1)
+    X = X.copy()
+    X[:, 5] = 0.3
+    gm = GoalHMM(n_states_max=4, n_restarts=2, covariance_types=["full"]).fit(X, lengths)
+    assert gm.covariance_type_ == "full"
+    eps = 1e-3 * X.var(axis=0).mean()
+    # covars = (eps I + scatter) / occupancy, occupancy <= N.
+    assert np.linalg.eigvalsh(gm.covars_).min() >= eps / len(X) * 0.99
+    assert np.isfinite(gm.score(X, lengths))
+
+
+def test_convergence_read_from_history():
+    _, X, lengths = _data(3, 2)
+    one = GoalHMM(n_states_min=3, n_states_max=3, n_restarts=1, n_iter=1).fit(X, lengths)
+    assert not one.converged_ and one.n_iter_ == 1  # budget ran out; hmmlearn says "converged"
+    full = GoalHMM(n_states_min=3, n_states_max=3, n_restarts=1, n_iter=200).fit(X, lengths)
+    assert full.converged_ and 2 <= full.n_iter_ < 200
+
+
+def test_inference_matches_hmmlearn(fitted4):
+    model, X, lengths, gm = fitted4
+    ref = _reference(gm)
+    G, _ = sample_demonstrations(model, [40], seed=99, reach_end=False)
+    np.testing.assert_allclose(gm.predict_proba(G), ref.predict_proba(G), atol=1e-10)
+    assert np.isclose(gm.score(G), ref.score(G), rtol=1e-10)
+    assert np.isclose(gm.score(X, lengths), ref.score(X, lengths), rtol=1e-10)
+    np.testing.assert_array_equal(gm.decode(G), ref.decode(G)[1])
+    # Far from every state: the scaled pass underflows, the log-space fallback is exact.
+    far = G + 40.0
+    np.testing.assert_allclose(gm.predict_proba(far), ref.predict_proba(far), atol=1e-8)
+    assert np.isclose(gm.score(far), ref.score(far), rtol=1e-10)
+
+
+def test_forward_backward_brute_force():
+    # Enumerate all k^T paths of a small random HMM.
+    rng = np.random.default_rng(3)
+    k, T = 3, 5
+    pi = rng.dirichlet(np.ones(k))
+    P = rng.dirichlet(np.ones(k), size=k)
+    log_b = rng.normal(0, 2, (T, k))
+    paths = np.array(np.meshgrid(*[np.arange(k)] * T, indexing="ij")).reshape(T, -1).T
+    w = pi[paths[:, 0]] * np.prod(P[paths[:, :-1], paths[:, 1:]], axis=1) * np.exp(log_b[np.arange(T), paths].sum(1))
+    filtered, smoothed, ll = forward_backward(log_b, pi, P)
+    assert np.isclose(ll, np.log(w.sum()))
+    for t in range(T):
+        np.testing.assert_allclose(smoothed[t], np.bincount(paths[:, t], weights=w, minlength=k) / w.sum())
+        # Filtered: marginalise the future out of the prefix likelihood.
+        wt = pi[paths[:, 0]] * np.prod(P[paths[:, :t], paths[:, 1:t + 1]], axis=1) * np.exp(
+            log_b[np.arange(t + 1), paths[:, :t + 1]].sum(1))
+        f = np.bincount(paths[:, t], weights=wt, minlength=k)
+        np.testing.assert_allclose(filtered[t], f / f.sum())
+    path, lp = viterbi(log_b, pi, P)
+    assert np.array_equal(path, paths[np.argmax(w)]) and np.isclose(lp, np.log(w.max()))
+
+
+def test_save_load_round_trip(tmp_path, fitted4):
+    _, X, lengths, gm = fitted4
+    arrays, meta = gm.to_arrays()
+    atomic_save_npz(tmp_path / "hmm.npz", arrays)
+    atomic_write_json(tmp_path / "hmm.json", meta)
+    back = GoalHMM.from_arrays(load_npz(tmp_path / "hmm.npz"), json.loads((tmp_path / "hmm.json").read_text()))
+    assert back.n_states_ == gm.n_states_ and back.covariance_type_ == gm.covariance_type_
+    assert back.restart_ == gm.restart_ and back.get_params() == gm.get_params()
+    np.testing.assert_array_equal(back.terminal_states_, gm.terminal_states_)
+    np.testing.assert_array_equal(back.predict_proba(X[:50]), gm.predict_proba(X[:50]))
+    with pytest.raises(ValueError, match="means"):
+        GoalHMM.from_arrays({k: v for k, v in arrays.items() if k != "means"}, meta)
+
+
+def test_config_loads_from_yaml():
+    cfg = yaml_load_typed(schema=GoalModelConfig, data="""
+n_states_min: 3
+n_states_max: 5
+criterion: bic
+covariance_types: [diag]
+random_state: 4
+""")
+    gm = GoalHMM.from_config(cfg)
+    assert (gm.n_states_min, gm.n_states_max, gm.criterion, list(gm.covariance_types), gm.random_state) == (
+        3, 5, "bic", ["diag"], 4)
+
+
+def test_bad_input_is_a_clear_error(fitted4):
+    _, X, lengths, gm = fitted4
+    with pytest.raises(ValueError, match=r"X: expected a 2-D array .* shape \(50,\)"):
+        GoalHMM().fit(X[:50, 0])
+    bad = X.copy()
+    bad[7, 2] = np.nan
+    with pytest.raises(ValueError, match="X: non-finite value nan at frame 7, feature 2"):
+        GoalHMM().fit(bad, lengths)
+    with pytest.raises(ValueError, match="X: empty sequence"):
+        GoalHMM().fit(np.zeros((0, 8)))
+    with pytest.raises(ValueError, match="lengths: sum 100 does not match the 155 frames"):
+        GoalHMM().fit(X, [50, 50])
+    with pytest.raises(ValueError, match="lengths: every sequence needs at least one frame"):
+        GoalHMM().fit(X, [50, 105, 0])
+    with pytest.raises(ValueError, match="lengths: demonstration 0 has 3 frames, fewer than .* n_states_min=4"):
+        GoalHMM(n_states_min=4).fit(X[:3])
+    with pytest.raises(ValueError, match="criterion"):
+        GoalHMM(criterion="hqc").fit(X, lengths)
+    with pytest.raises(ValueError, match=r"G: expected 8 features per frame, got shape \(10, 7\)"):
+        gm.predict_proba(X[:10, :7])
+    with pytest.raises(RuntimeError, match="not fitted"):
+        GoalHMM().predict_proba(X[:10])

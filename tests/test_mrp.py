@@ -1,0 +1,103 @@
+"""MRP state values: Monte Carlo (thesis Eqs. 4.1-4.3) against dynamic programming."""
+
+import numpy as np
+import pytest
+from pydrake.common.yaml import yaml_load_typed
+
+from drake_skill.mrp import (
+    MrpConfig,
+    discounted_returns,
+    exact_values,
+    expected_visit_times,
+    monte_carlo_values,
+    sample_state_sequences,
+    state_marginals,
+)
+
+# A 4-state left-to-right chain with a leak back from state 2, like a fitted goal model.
+PI = np.array([0.9, 0.1, 0.0, 0.0])
+P = np.array([
+    [0.85, 0.15, 0.00, 0.00],
+    [0.00, 0.80, 0.20, 0.00],
+    [0.00, 0.05, 0.80, 0.15],
+    [0.00, 0.00, 0.00, 1.00],
+])
+TERMINAL = [3]
+L = 50
+
+
+def test_returns_follow_eq_4_1():
+    r = np.array([0.0, 1.0, 0.0, 1.0])
+    # G_4 = 1, G_3 = 0.9, G_2 = 1 + 0.81, G_1 = 0.9 * 1.81
+    np.testing.assert_allclose(discounted_returns(r, 0.9), [1.629, 1.81, 0.9, 1.0])
+
+
+def test_monte_carlo_converges_to_dynamic_programming():
+    exact = exact_values(PI, P, TERMINAL, L, gamma=0.9, terminal_scale=2.0)
+    mc = monte_carlo_values(PI, P, TERMINAL, L, n_sequences=300_000, gamma=0.9, terminal_scale=2.0,
+                            random_state=1)
+    np.testing.assert_allclose(mc, exact, atol=0.02)
+    # The thesis' n = 100 is already close but visibly noisier.
+    mc100 = monte_carlo_values(PI, P, TERMINAL, L, random_state=1)
+    assert 0.02 < np.abs(mc100 - exact).max() < 0.5
+
+
+def test_values_rise_toward_the_terminal_state():
+    for v in (exact_values(PI, P, TERMINAL, L), monte_carlo_values(PI, P, TERMINAL, L, random_state=0)):
+        assert np.all(np.diff(v) > 0), v
+
+
+def test_absorbing_terminal_state_closed_form():
+    # One absorbing terminal state: u_t = (1 - g^(L-t+1)) / (1 - g); v = mean over t, times c.
+    g, n = 0.9, 20
+    u = (1 - g ** np.arange(n, 0, -1)) / (1 - g)
+    expected = 3.0 * u.mean()
+    assert np.isclose(exact_values([1.0], [[1.0]], [0], n, gamma=g, terminal_scale=3.0)[0], expected)
+    mc = monte_carlo_values([1.0], [[1.0]], [0], n, n_sequences=3, gamma=g, terminal_scale=3.0)
+    assert np.isclose(mc[0], expected)
+
+
+def test_terminal_scale_and_unvisited_states():
+    P5 = np.eye(5)
+    P5[:4] = np.hstack([P, np.zeros((4, 1))])  # state 4 is unreachable
+    pi5 = np.r_[PI, 0.0]
+    v1 = exact_values(pi5, P5, TERMINAL, L, terminal_scale=1.0)
+    v2 = exact_values(pi5, P5, TERMINAL, L, terminal_scale=2.0)
+    assert np.isclose(v2[3], 2 * v1[3]) and np.allclose(v2[:3], v1[:3])
+    assert v2[4] == 0.0
+    mc = monte_carlo_values(pi5, P5, TERMINAL, L, random_state=0)
+    assert mc[4] == 0.0 and np.isnan(expected_visit_times(pi5, P5, L)[4])
+
+
+def test_sampling_is_seeded_and_follows_the_chain():
+    a = sample_state_sequences(PI, P, 2000, L, random_state=3)
+    b = sample_state_sequences(PI, P, 2000, L, random_state=3)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, sample_state_sequences(PI, P, 2000, L, random_state=4))
+    # Empirical marginals match pi P^t; forbidden moves never happen.
+    emp = np.stack([np.bincount(a[:, t], minlength=4) / 2000 for t in range(L)])
+    np.testing.assert_allclose(emp, state_marginals(PI, P, L), atol=0.04)
+    moves = set(zip(a[:, :-1].ravel(), a[:, 1:].ravel()))
+    assert all(P[i, j] > 0 for i, j in moves)
+    np.testing.assert_array_equal(monte_carlo_values(PI, P, TERMINAL, L, random_state=5),
+                                  monte_carlo_values(PI, P, TERMINAL, L, random_state=5))
+
+
+def test_config_loads_from_yaml():
+    cfg = yaml_load_typed(schema=MrpConfig, data="n_sequences: 500\nterminal_scale: 3.0\n")
+    assert (cfg.n_sequences, cfg.gamma, cfg.terminal_scale, cfg.length) == (500, 0.9, 3.0, 0)
+
+
+def test_bad_input_is_a_clear_error():
+    with pytest.raises(ValueError, match=r"transmat: expected shape \(4, 4\)"):
+        exact_values(PI, P[:3], TERMINAL, L)
+    with pytest.raises(ValueError, match="transmat: expected non-negative rows summing to 1"):
+        exact_values(PI, P * 0.5, TERMINAL, L)
+    with pytest.raises(ValueError, match="startprob: expected a probability vector"):
+        monte_carlo_values([0.5, 0.6, 0, 0], P, TERMINAL, L)
+    with pytest.raises(ValueError, match=r"terminal_states: .* in \[0, 4\), got \[4\]"):
+        monte_carlo_values(PI, P, [4], L)
+    with pytest.raises(ValueError, match="length: expected a sequence length >= 1, got 0"):
+        exact_values(PI, P, TERMINAL, 0)
+    with pytest.raises(ValueError, match="gamma"):
+        exact_values(PI, P, TERMINAL, L, gamma=1.5)

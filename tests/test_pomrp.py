@@ -1,0 +1,176 @@
+"""POMRP rewards (thesis Eqs. 4.4, 4.5), filtered reward, streaming filter and verdict."""
+
+import json
+
+import numpy as np
+import pytest
+from hmmlearn.hmm import GaussianHMM
+from pydrake.common.yaml import yaml_load_typed
+
+from drake_skill.bench import reward as bench_reward
+from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
+from drake_skill.fileio import atomic_save_npz, atomic_write_json, load_npz
+from drake_skill.mrp import exact_values
+from drake_skill.pomrp import Pomrp, PomrpConfig, VerdictConfig, fit_pomrp
+
+TRUE = left_to_right_model(n_states=4, seed=0)
+
+
+def _path_sequence(states, seed):
+    """Goal data emitted by the true model along a given state path."""
+    _, _, means, covars = TRUE
+    rng = np.random.default_rng(seed)
+    states = np.asarray(states)
+    return means[states] + rng.standard_normal((len(states), means.shape[1])) * np.sqrt(covars[0, 0, 0])
+
+
+@pytest.fixture(scope="module")
+def pomrp():
+    X, lengths = sample_demonstrations(TRUE, [50, 60, 45], seed=0)
+    return fit_pomrp(X, lengths)
+
+
+@pytest.fixture(scope="module")
+def held_out():
+    return [sample_demonstrations(TRUE, [50], seed=100 + i)[0] for i in range(5)]
+
+
+@pytest.fixture(scope="module")
+def stalled():
+    # Halfway: reaches the second of four sub-goals and stays; never leaves the start.
+    return {"halfway": _path_sequence([0] * 10 + [1] * 40, 1), "start": _path_sequence([0] * 50, 2)}
+
+
+def test_fitted_values_rise_toward_terminal(pomrp):
+    gm = pomrp.goal_model
+    assert pomrp.n_states == 4 and len(pomrp.terminal_states) == 1
+    order = np.argsort(np.linalg.norm(gm.means_[:, None] - TRUE[2][None], axis=2).argmin(axis=1))
+    v = pomrp.values[order]  # values in the order of the true sub-goals
+    assert np.all(np.diff(v) > 0)
+    assert order[-1] == pomrp.terminal_states[0]
+    # MC (n = 100, seeded) near the exact values of the same MRP.
+    L = int(np.floor(gm.lengths_.mean()))
+    exact = exact_values(gm.startprob_, gm.transmat_, pomrp.terminal_states, L)
+    np.testing.assert_allclose(pomrp.values, exact, rtol=0.05)
+
+
+def test_return_ordering(pomrp, held_out, stalled):
+    demo = [pomrp.episode_return(G) for G in held_out]
+    half = pomrp.episode_return(stalled["halfway"])
+    start = pomrp.episode_return(stalled["start"])
+    assert min(demo) > half > start > 0
+
+
+def test_rewards_are_values_under_smoothed_posteriors(pomrp, held_out):
+    gm = pomrp.goal_model
+    ref = GaussianHMM(n_components=gm.n_states_, covariance_type="full", init_params="")
+    ref.startprob_, ref.transmat_, ref.means_, ref.covars_ = gm.startprob_, gm.transmat_, gm.means_, gm.covars_
+    G = held_out[0]
+    filtered, smoothed, ll = pomrp.posteriors(G)
+    np.testing.assert_allclose(smoothed, ref.predict_proba(G), atol=1e-10)
+    assert np.isclose(ll, ref.score(G), rtol=1e-12)
+    h, R = pomrp.reward_and_return(G)
+    np.testing.assert_allclose(h, ref.predict_proba(G) @ pomrp.values, rtol=1e-9)
+    assert np.isclose(R, h.sum()) and np.isclose(pomrp.episode_return(G), R)
+    np.testing.assert_array_equal(pomrp.rewards(G), h)
+
+
+def test_filtered_reward_equals_brute_force_forward(pomrp, held_out):
+    # Brute force: for each t, the unnormalised forward recursion of Eq. 3.10
+    # restarted on g_1..g_t in plain probability space (no scaling, no logs).
+    gm = pomrp.goal_model
+    G = held_out[1][:25]
+    b = np.exp(gm.log_emission(G))
+    expected = []
+    for t in range(len(G)):
+        alpha = gm.startprob_ * b[0]
+        for j in range(1, t + 1):
+            alpha = (alpha @ gm.transmat_) * b[j]
+        expected.append(alpha @ pomrp.values / alpha.sum())
+    np.testing.assert_allclose(pomrp.filtered_rewards(G), expected, rtol=1e-9)
+    # Online, the filtered reward never uses frames after t.
+    np.testing.assert_allclose(pomrp.filtered_rewards(G[:10]), expected[:10], rtol=1e-9)
+
+
+def test_streaming_filter_matches_batch(pomrp, held_out, stalled):
+    for G in (held_out[2], stalled["halfway"]):
+        lb, total, rewards = None, 0.0, []
+        for t, g in enumerate(G):
+            lb, step_ll, r = pomrp.filter_update(lb, g, first=(t == 0))
+            total += step_ll
+            rewards.append(r)
+        np.testing.assert_allclose(rewards, pomrp.filtered_rewards(G), rtol=1e-9)
+        assert np.isclose(total, pomrp.goal_model.score(G), rtol=1e-12)
+        assert np.isclose(np.exp(lb).sum(), 1.0)
+
+
+def test_far_execution_is_finite(pomrp, held_out):
+    far = held_out[0] + 30.0  # every density underflows in probability space
+    h, R = pomrp.reward_and_return(far)
+    assert np.all(np.isfinite(h)) and np.isfinite(R)
+    assert np.all(np.isfinite(pomrp.filtered_rewards(far)))
+
+
+def test_verdict(pomrp, held_out, stalled):
+    assert all(pomrp.verdict(G) for G in held_out)
+    assert not pomrp.verdict(stalled["halfway"])
+    assert not pomrp.verdict(stalled["start"])
+    d = pomrp.verdict_details(stalled["halfway"])
+    assert not d["terminal"] and d["final_state"] not in pomrp.terminal_states
+    # Optional likelihood rule: demonstration-like data stays in range, a
+    # sequence that ends at the goal through unseen goal data does not.
+    strict = Pomrp(pomrp.goal_model, pomrp.values, VerdictConfig(require_likelihood=True))
+    assert all(strict.verdict(G) for G in held_out)
+    odd = held_out[0].copy()
+    odd[:40] += 0.3  # off every sub-goal for most of the execution
+    loose = pomrp.verdict_details(odd)
+    assert loose["terminal"] and loose["success"]
+    tight = strict.verdict_details(odd)
+    assert not tight["loglik_in_range"] and not tight["success"]
+    lo, hi = strict.loglik_range
+    assert hi - lo == pytest.approx(np.ptp(pomrp.goal_model.loglik_per_step_) + 2 * 2.0)
+
+
+def test_save_load_round_trip(tmp_path, pomrp, held_out):
+    arrays, meta = pomrp.to_arrays()
+    atomic_save_npz(tmp_path / "goal.npz", arrays)
+    atomic_write_json(tmp_path / "goal.json", meta)
+    back = Pomrp.from_arrays(load_npz(tmp_path / "goal.npz"), json.loads((tmp_path / "goal.json").read_text()))
+    np.testing.assert_array_equal(back.values, pomrp.values)
+    assert back.episode_return(held_out[0]) == pomrp.episode_return(held_out[0])
+    assert back.verdict_config == pomrp.verdict_config
+
+
+def test_config_loads_from_yaml():
+    cfg = yaml_load_typed(schema=PomrpConfig, data="""
+goal_model: {n_states_max: 5, covariance_types: [diag]}
+mrp: {terminal_scale: 3.0}
+verdict: {require_likelihood: true, loglik_margin: 1.5}
+""")
+    assert cfg.goal_model.n_states_max == 5 and cfg.goal_model.covariance_types == ["diag"]
+    assert cfg.mrp.terminal_scale == 3.0 and cfg.mrp.n_sequences == 100
+    assert cfg.verdict == VerdictConfig(True, 1.5)
+
+
+def test_bad_input_is_a_clear_error(pomrp, held_out):
+    G = held_out[0]
+    with pytest.raises(ValueError, match=r"G: expected 8 features per frame, got shape \(50, 3\)"):
+        pomrp.episode_return(G[:, :3])
+    with pytest.raises(ValueError, match=r"G: expected a 2-D array"):
+        pomrp.rewards(G[0])
+    bad = G.copy()
+    bad[3, 1] = np.inf
+    with pytest.raises(ValueError, match="G: non-finite value inf at frame 3, feature 1"):
+        pomrp.verdict(bad)
+    with pytest.raises(ValueError, match="G: empty sequence"):
+        pomrp.filtered_rewards(np.zeros((0, 8)))
+    with pytest.raises(ValueError, match=r"g: expected one frame of shape \(8,\)"):
+        pomrp.filter_update(None, G[:2], first=True)
+    with pytest.raises(ValueError, match=r"values: expected 4 finite state values"):
+        Pomrp(pomrp.goal_model, [1.0, 2.0])
+
+
+def test_bench_reward_json(capsys):
+    assert bench_reward.main(["--json", "--no-fit", "--repeats", "5"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert 0 < out["reward_ms"] < 50 and out["n_frames"] == 50 and out["bench_states"] == 8
