@@ -76,7 +76,7 @@ class EndEffectorController(Diagram):
         params.set_end_effector_translational_velocity_limits([-v] * 3, [v] * 3)
         params.set_end_effector_angular_speed_limit(2.0)
         params.set_nominal_joint_position(q_home)
-        params.set_joint_centering_gain(0.05 * np.eye(7))
+        params.set_joint_centering_gain(config.joint_centering_gain * np.eye(7))
 
         self._diff_ik = builder.AddNamedSystem("diff_ik", DifferentialInverseKinematicsIntegrator(
             plant, plant.world_frame(), plant.GetFrameByName("ee"), config.diff_ik_period, params, context, True))

@@ -64,13 +64,15 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
         # elbow into joint 4's limit.
         frames += [(1.5, under_lip + [0.0, 0.0, 0.16], R, 0.0),
                    (2.5, under_lip + [-0.05, 0.0, 0.05], R, 0.0),
-                   (3.5, under_lip, R, 0.0)]
-        for i, theta in enumerate(np.linspace(0.0, 1.55, 9)[1:]):
+                   (3.5, under_lip, R, 0.0),
+                   (4.0, under_lip, R, 0.0)]    # a pause, as a person makes before lifting
+        for i, theta in enumerate(np.linspace(0.0, 1.75, 9)[1:]):
             contact = _arc(theta, radius) + push * np.array([np.sin(theta), np.cos(theta)])
             frames.append((4.0 + 0.5 * (i + 1), _xyz(contact - tip_offset), R, 0.0))
         last = frames[-1][1]
-        frames += [(8.5, last + [-0.10, 0.0, 0.0], R, 0.0),
-                   (9.5, last + [-0.20, 0.0, 0.05], R, 0.0)]
+        # Leave upward first, then back: retreating straight back drags the lid.
+        frames += [(8.5, last + [0.0, 0.0, 0.06], R, 0.0),
+                   (9.5, last + [-0.15, 0.0, 0.08], R, 0.0)]
     elif skill == "close":
         R = R_OE_DOWN
         radius, push = 0.19, 0.010
@@ -82,18 +84,20 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
             return _xyz(tip + [0.0, TCP_TO_TIP])
         start = tcp(theta0) + [0.03, 0.0, 0.0]
         frames += [(2.5, start + [0.0, 0.0, 0.10], R, 0.0),
-                   (3.5, start, R, 0.0)]
+                   (3.5, start, R, 0.0),
+                   (4.0, start, R, 0.0)]
         for i, theta in enumerate(np.linspace(theta0, -0.05, 10)[1:]):
-            frames.append((3.5 + 0.5 * (i + 1), tcp(theta), R, 0.0))
+            frames.append((4.0 + 0.5 * (i + 1), tcp(theta), R, 0.0))
         last = frames[-1][1]
-        frames += [(9.0, last + [0.0, 0.0, 0.12], R, 0.0)]
+        frames += [(9.5, last + [0.0, 0.0, 0.12], R, 0.0)]
     elif skill == "draw":
         R = R_OE_DOWN
         gap_x, tip_z = -0.173, 0.115
         frames += [(2.5, np.array([gap_x, 0.0, 0.30]), R, 0.0),
                    (3.5, np.array([gap_x, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
-                   (6.5, np.array([gap_x - 0.17, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
-                   (7.5, np.array([gap_x - 0.17, 0.0, 0.30]), R, 0.0)]
+                   (4.0, np.array([gap_x, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
+                   (7.0, np.array([gap_x - 0.17, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
+                   (8.0, np.array([gap_x - 0.17, 0.0, 0.30]), R, 0.0)]
     else:
         raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
     return frames

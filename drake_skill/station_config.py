@@ -70,6 +70,8 @@ class ControllerConfig:
     kp, kd: joint stiffness [N m/rad] and damping [N m s/rad] of the impedance
       controller (SAP implicit PD on each actuator), joints 1..7.
     finger_kp, finger_kd: the same for the two prismatic fingers [N/m, N s/m].
+    joint_centering_gain: pull of the redundant joint motion toward q_home
+      [1/s] (differential IK's secondary objective).
     """
 
     diff_ik_period: float = 0.01
@@ -79,6 +81,7 @@ class ControllerConfig:
     kd: list[float] = dc.field(default_factory=lambda: [150.0] * 4 + [40.0] * 3)
     finger_kp: float = 2000.0
     finger_kd: float = 40.0
+    joint_centering_gain: float = 1.0
 
 
 @dc.dataclass
