@@ -349,6 +349,25 @@ def _segmental_kmeans(segs: list[np.ndarray], labels: list[np.ndarray], k: int,
     return np.concatenate(labels)
 
 
+def _full_covars(model) -> np.ndarray:
+    """A fitted hmmlearn GaussianHMM's covariances as full matrices ``(k, d, d)``.
+
+    Built from ``_covars_`` by hand: hmmlearn 0.3's spherical M-step stores
+    ``(k, d)`` variances, which its own ``covars_`` property expands to
+    ``(k d, d, d)``.
+    """
+    k, d = model.n_components, model.means_.shape[1]
+    c = np.asarray(model._covars_, dtype=float)
+    eye = np.eye(d)
+    if model.covariance_type == "spherical":
+        return np.ravel(c).reshape(k, -1).mean(axis=1)[:, None, None] * eye
+    if model.covariance_type == "diag":
+        return c[:, :, None] * eye
+    if model.covariance_type == "tied":
+        return np.broadcast_to(c, (k, d, d)).copy()
+    return c.copy()
+
+
 def _split(lengths: np.ndarray) -> list[slice]:
     ends = np.cumsum(lengths)
     return [slice(int(e - n), int(e)) for e, n in zip(ends, lengths)]
@@ -372,7 +391,13 @@ class GoalHMM:
       ``loglik_per_step_ (n_demos,)`` each demonstration's
       ``log P(G) / T`` in nats per frame (the range the verdict may check);
     * ``criterion_table_``: one dict per candidate (k, covariance_type,
-      n_params, log_likelihood, aic, bic, restart, converged, n_iter, status).
+      n_params, log_likelihood, aic, bic, restart, converged, n_iter, status
+      "ok" / "degenerate" / "failed"), JSON-able.
+
+    ``converged`` means EM stopped on the tolerance before the iteration
+    budget with no likelihood drop beyond rounding (read from
+    ``monitor_.history``).  Per candidate, non-degenerate then converged
+    restarts are preferred, then the highest log-likelihood.
     """
 
     def __init__(self, n_states_min: int = 2, n_states_max: int = 8, criterion: str = "aic",
@@ -431,8 +456,18 @@ class GoalHMM:
         Every candidate ``k`` in ``[n_states_min, min(n_states_max, shortest
         demonstration)]`` and covariance type is fitted with ``n_restarts``
         Baum-Welch runs; the candidate with the smallest criterion
-        ``AIC = -2 log L + 2 p`` (or ``BIC = -2 log L + p log N``) wins, with
-        ``p`` from :func:`n_free_parameters`.
+        ``AIC = -2 log L + 2 p`` (or ``BIC = -2 log L + p log N``, ``N``
+        frames) wins, with ``p`` from :func:`n_free_parameters`.
+
+        A run is *degenerate* when some state explains fewer frames (summed
+        smoothed posteriors) than its covariance needs: ``d + 1`` for full,
+        2 for diag/spherical.  Such a state's density is bounded only by the
+        regulariser, so its likelihood (and AIC) is spuriously good; with
+        2-3 demonstrations this otherwise makes AIC pick many full-covariance
+        states.  Degenerate candidates are chosen only if nothing else fits.
+
+        Raises ValueError on bad input, including a demonstration shorter
+        than ``n_states_min``.
         """
         self._check_params()
         X, lengths = check_sequences(X, lengths)
@@ -568,7 +603,7 @@ class GoalHMM:
         d = X.shape[1]
         ct_index = COVARIANCE_TYPES.index(ct)
         prior = {
-            "spherical": np.full(k, eps),
+            "spherical": np.full((k, d), eps),  # its M-step works on (k, d) variances
             "diag": np.full((k, d), eps),
             "full": np.broadcast_to(eps * np.eye(d), (k, d, d)).copy(),
             "tied": eps * np.eye(d),
@@ -618,7 +653,7 @@ class GoalHMM:
         start = np.asarray(model.startprob_, dtype=float).copy()
         trans = np.asarray(model.transmat_, dtype=float).copy()
         means = np.asarray(model.means_, dtype=float).copy()
-        covars = np.asarray(model.covars_, dtype=float).copy()  # full (k, d, d)
+        covars = _full_covars(model)
         if not all(np.all(np.isfinite(a)) for a in (start, trans, means, covars)):
             return None
         # A state that received no frames keeps an all-zero row: make it absorbing.

@@ -18,6 +18,7 @@ Values ``v`` come from :mod:`drake_skill.mrp`; rewards are unitless
 """
 
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -61,9 +62,12 @@ class Pomrp:
       goal_model: a fitted :class:`GoalHMM` (``k`` states, ``d`` features).
       values: ``v (k,)`` state values (:func:`drake_skill.mrp.monte_carlo_values`).
       verdict: :class:`VerdictConfig`.
+      info: JSON-able provenance saved with the model (``fit_pomrp`` records
+        the MRP settings and horizon ``L`` there).
     """
 
-    def __init__(self, goal_model: GoalHMM, values, verdict: VerdictConfig | None = None):
+    def __init__(self, goal_model: GoalHMM, values, verdict: VerdictConfig | None = None,
+                 info: dict[str, Any] | None = None):
         goal_model._check_fitted()
         v = np.asarray(values, dtype=float)
         k = goal_model.n_states_
@@ -72,6 +76,7 @@ class Pomrp:
         self.goal_model = goal_model
         self.values = v
         self.verdict_config = verdict if verdict is not None else VerdictConfig()
+        self.info = dict(info or {})  # JSON-able provenance, e.g. the MRP settings
         if not self.verdict_config.loglik_margin >= 0:
             raise ValueError(f"verdict.loglik_margin: expected >= 0, got {self.verdict_config.loglik_margin}")
         # Parameters cached once: the reward path must stay well under 1 ms.
@@ -189,7 +194,7 @@ class Pomrp:
         arrays, meta = self.goal_model.to_arrays()
         out = {f"hmm_{k}": v for k, v in arrays.items()}
         out["values"] = self.values.copy()
-        return out, {"hmm": meta, "verdict": {
+        return out, {"hmm": meta, "info": self.info, "verdict": {
             "require_likelihood": bool(self.verdict_config.require_likelihood),
             "loglik_margin": float(self.verdict_config.loglik_margin)}}
 
@@ -199,7 +204,8 @@ class Pomrp:
             raise ValueError("arrays: missing 'values'")
         hmm = GoalHMM.from_arrays({k[4:]: v for k, v in arrays.items() if k.startswith("hmm_")},
                                   metadata.get("hmm", {}))
-        return cls(hmm, arrays["values"], VerdictConfig(**metadata.get("verdict", {})))
+        return cls(hmm, arrays["values"], VerdictConfig(**metadata.get("verdict", {})),
+                   metadata.get("info", {}))
 
 
 def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
@@ -216,4 +222,5 @@ def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
     v = monte_carlo_values(hmm.startprob_, hmm.transmat_, hmm.terminal_states_, L,
                            n_sequences=mc.n_sequences, gamma=mc.gamma,
                            terminal_scale=mc.terminal_scale, random_state=mc.random_state)
-    return Pomrp(hmm, v, config.verdict)
+    info = {"mrp": dataclasses.asdict(mc), "mrp_length": L}
+    return Pomrp(hmm, v, config.verdict, info)

@@ -85,6 +85,19 @@ def test_parameter_counts():
         n_free_parameters(3, 8, "banana")
 
 
+def test_every_covariance_type_fits():
+    _, X, lengths = _data(3, 2, [40, 50])
+    gm = GoalHMM(n_states_min=2, n_states_max=3, n_restarts=2,
+                 covariance_types=["spherical", "diag", "full", "tied"]).fit(X, lengths)
+    status = {(r["k"], r["covariance_type"]): r["status"] for r in gm.criterion_table_}
+    assert len(status) == 8 and "failed" not in status.values()
+    assert status[(3, "spherical")] == status[(3, "diag")] == status[(3, "tied")] == "ok"
+    assert gm.n_states_ == 3
+    # The true noise is isotropic: the fewest-parameter type that fits it wins.
+    assert gm.covariance_type_ == "spherical"
+    assert gm.covars_.shape == (3, 8, 8)
+
+
 def test_bic_is_an_option(fitted4):
     _, X, lengths, gm = fitted4
     bic = GoalHMM(criterion="bic", random_state=0).fit(X, lengths)

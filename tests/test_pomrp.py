@@ -139,6 +139,8 @@ def test_save_load_round_trip(tmp_path, pomrp, held_out):
     np.testing.assert_array_equal(back.values, pomrp.values)
     assert back.episode_return(held_out[0]) == pomrp.episode_return(held_out[0])
     assert back.verdict_config == pomrp.verdict_config
+    assert back.info == pomrp.info == {"mrp": {"n_sequences": 100, "gamma": 0.9, "terminal_scale": 2.0,
+                                               "length": 0, "random_state": 0}, "mrp_length": 51}
 
 
 def test_config_loads_from_yaml():
