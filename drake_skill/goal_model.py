@@ -12,11 +12,15 @@ demonstrations (thesis chapter 4).
 Baum-Welch itself is hmmlearn's.  What this module adds is what hmmlearn does
 not do safely with 2-3 short sequences:
 
-* deterministic initialisation (hmmlearn's k-means init is seed-fragile and
-  can produce NaN start probabilities): restart 0 cuts every demonstration
-  into ``k`` equal time segments; later restarts use random time segments or
-  k-means clusters ordered by time.  Transitions start left-to-right biased
-  and the start probability sits on the first state;
+* deterministic initialisation (hmmlearn's own random init is seed-fragile
+  and can produce NaN start probabilities): restart 0 splits every
+  demonstration at its ``k - 1`` least-squares change points and refines the
+  split by left-to-right segmental k-means; odd restarts use seeded k-means
+  clusters ordered by mean time, even ones random time segments refined the
+  same way.  Transitions start left-to-right biased (stay probability from
+  the segment durations) and the start probability sits on the first state.
+  Equal time cuts were tried first and stuck EM in poor optima: demonstrations
+  spend most of their frames in the final sub-goal;
 * a real regulariser in every M-step: ``covars_prior = eps*I`` with the shape
   hmmlearn expects for the covariance type (a scalar prior is broadcast to
   *every entry* of a full matrix, and ``min_covar`` is only used at init);
@@ -25,13 +29,16 @@ not do safely with 2-3 short sequences:
 * convergence read from ``monitor_.history`` (hmmlearn's ``converged`` is also
   true when the iteration budget runs out or the likelihood drops);
 * several seeded restarts per candidate ``(k, covariance type)``; the best
-  converged restart by log-likelihood wins and its index is recorded.
+  converged restart by log-likelihood wins and its index is recorded;
+* runs where a state explains too few frames to estimate its covariance are
+  marked degenerate and lose to every proper candidate (see :meth:`GoalHMM.fit`);
+* BLAS limited to one thread during the fit (tiny matrices; thread hand-offs
+  on a busy machine made hmmlearn's triangular solves several times slower).
 
 Inference (log emission densities, scaled forward-backward, Viterbi) is
 implemented here in vectorised numpy on the fitted parameters; see
 :func:`forward_backward` for why.
 """
-
 
 import logging
 from dataclasses import dataclass, field
@@ -72,7 +79,7 @@ class GoalModelConfig:
       covariance_types: hmmlearn covariance types tried; the criterion picks
         one together with ``k``.
       n_restarts: EM runs per candidate ``(k, covariance type)``; restart 0 is
-        the deterministic equal-time-segment init, the others are seeded.
+        the deterministic change-point init, the others are seeded.
       n_iter: Baum-Welch iteration budget per run.
       tol: convergence threshold on the gain of total log-likelihood (nats).
       covar_reg: M-step covariance regulariser, relative to the mean

@@ -20,7 +20,6 @@ finite-horizon MRP.  Values are unitless (discounted counts of terminal
 visits), at most ``c / (1 - gamma)``.
 """
 
-
 from dataclasses import dataclass
 
 import numpy as np
@@ -124,12 +123,12 @@ def sample_state_sequences(startprob, transmat, n_sequences: int, length: int, r
 
 def discounted_returns(rewards: np.ndarray, gamma: float) -> np.ndarray:
     """Eq. 4.1 along the last axis: ``G_L = r_L``, ``G_t = r_t + gamma G_{t+1}``."""
-    r = np.asarray(rewards, dtype=float)
+    r = np.ascontiguousarray(np.moveaxis(np.asarray(rewards, dtype=float), -1, 0))  # time first
     G = np.empty_like(r)
-    G[..., -1] = r[..., -1]
-    for t in range(r.shape[-1] - 2, -1, -1):
-        G[..., t] = r[..., t] + gamma * G[..., t + 1]
-    return G
+    G[-1] = r[-1]
+    for t in range(r.shape[0] - 2, -1, -1):
+        G[t] = r[t] + gamma * G[t + 1]
+    return np.moveaxis(G, 0, -1)
 
 
 def monte_carlo_values(startprob, transmat, terminal_states, length: int, *, n_sequences: int = 100,

@@ -17,7 +17,6 @@ Values ``v`` come from :mod:`drake_skill.mrp`; rewards are unitless
 (value per frame), returns are sums over frames.
 """
 
-
 import dataclasses
 from dataclasses import dataclass, field
 from typing import Any

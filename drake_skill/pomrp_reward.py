@@ -18,7 +18,6 @@ At the end of a rollout, :meth:`goal_sequence`, :meth:`smoothed_return`
 (Eq. 4.5 with smoothed posteriors) and :meth:`verdict` read the result.
 """
 
-
 from dataclasses import dataclass
 
 import numpy as np
