@@ -4,7 +4,9 @@ A thin Drake wrapper around :class:`drake_skill.pomrp.Pomrp`.  Every
 ``period`` seconds (10 Hz by default) it reads one frame of goal data and, if
 the frame is valid, appends it to the execution's sequence and advances the
 log-space forward filter.  Everything per-run lives in the context's discrete
-state, so resetting the context to its defaults starts a new execution.
+state, so resetting the context to its defaults starts a new execution
+(``SetDefaultContext`` keeps the time: set it back to 0 as well, or the first
+periodic update comes at the old time).
 
 Ports:
   * input ``goal_data`` (vector ``d``, 8 in the project): ``g_t``, unitless;
