@@ -48,11 +48,11 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import PdControllerGains
-from pydrake.perception import BaseField, DepthImageToPointCloud
+from pydrake.perception import BaseField, DepthImageToPointCloud, Fields, PointCloud
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import MatrixGain, ZeroOrderHold
+from pydrake.systems.primitives import ConstantValueSource, MatrixGain, ZeroOrderHold
 from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
-from pydrake.common.value import Value
+from pydrake.common.value import AbstractValue, Value
 
 from drake_skill.ee_controller import X_FLANGE_HAND, X_HAND_TCP, EndEffectorController
 from drake_skill.models import add_package_paths, model_url
@@ -210,22 +210,32 @@ class Station(Diagram):
         self._X_WC = look_at(cam.position, cam.target)
         sensor = builder.AddNamedSystem("camera", RgbdSensor(world_id, self._X_WC, color, depth))
         builder.Connect(self.scene_graph.get_query_output_port(), sensor.query_object_input_port())
-        # Sample-and-hold at the camera rate. Drake's RgbdSensorDiscrete would
-        # also hold a 16-bit depth image, which costs a third render per frame;
-        # holding only the images used keeps rendering on demand and cheap.
+        # Sample-and-hold at the camera rate: at each tick the colour and depth
+        # images are rendered once (the sensor caches them) and the point cloud
+        # is computed from them; between ticks nothing is recomputed. (Drake's
+        # RgbdSensorDiscrete would also hold a 16-bit depth image, a third
+        # render per frame.)
         period = 1.0 / cam.fps
+        to_cloud = builder.AddNamedSystem("depth_to_cloud", DepthImageToPointCloud(
+            info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
+        builder.Connect(sensor.depth_image_32F_output_port(), to_cloud.depth_image_input_port())
+        builder.Connect(sensor.color_image_output_port(), to_cloud.color_image_input_port())
+        # The camera is fixed in the world: a constant pose.
+        camera_pose = builder.AddNamedSystem("camera_pose", ConstantValueSource(AbstractValue.Make(self._X_WC)))
+        builder.Connect(camera_pose.get_output_port(), to_cloud.camera_pose_input_port())
+        # Before the first tick the held cloud is organised like the camera's,
+        # with no returns (NaN), as a camera that has not seen anything yet.
+        empty_cloud = PointCloud(cam.width * cam.height, Fields(BaseField.kXYZs | BaseField.kRGBs))
+        empty_cloud.mutable_xyzs()[:] = np.nan
+        empty_cloud.mutable_rgbs()[:] = 0
         held = {}
-        for name, port in (("color_image", sensor.color_image_output_port()),
-                           ("depth_image", sensor.depth_image_32F_output_port())):
-            zoh = builder.AddNamedSystem(f"{name}_hold", ZeroOrderHold(period, port.Allocate()))
+        for name, port, model in (
+                ("color_image", sensor.color_image_output_port(), None),
+                ("depth_image", sensor.depth_image_32F_output_port(), None),
+                ("point_cloud", to_cloud.point_cloud_output_port(), AbstractValue.Make(empty_cloud))):
+            zoh = builder.AddNamedSystem(f"{name}_hold", ZeroOrderHold(period, model or port.Allocate()))
             builder.Connect(port, zoh.get_input_port())
             held[name] = zoh.get_output_port()
-        to_cloud = builder.AddNamedSystem("point_cloud", DepthImageToPointCloud(
-            info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
-        builder.Connect(held["depth_image"], to_cloud.depth_image_input_port())
-        builder.Connect(held["color_image"], to_cloud.color_image_input_port())
-        builder.Connect(sensor.body_pose_in_world_output_port(), to_cloud.camera_pose_input_port())
-        builder.ExportOutput(to_cloud.point_cloud_output_port(), "point_cloud")
         for name, port in held.items():
             builder.ExportOutput(port, name)
         # The label image (ground truth for tests and data generation) is not
