@@ -1,0 +1,209 @@
+"""Demonstration files: exact round trip, validation errors naming file and field, corrupt files refused."""
+
+import json
+import re
+import zipfile
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw
+
+from drake_skill.demonstrations import (
+    SCHEMA_VERSION,
+    Demonstration,
+    DemonstrationError,
+    demo_path,
+    downsample_action,
+    load_demonstration,
+    load_demonstrations,
+    object_frame_poses,
+    save_demonstration,
+)
+
+
+def _vec(X):
+    return np.r_[X.translation(), X.rotation().ToQuaternion().wxyz()]
+
+
+def make_demo(seed=0, perception=True, skill="open", n=121) -> Demonstration:
+    """A valid synthetic demonstration: n samples at 100 Hz, every 10th at 10 Hz."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / 100.0
+    X_WO = RigidTransform(RollPitchYaw(0, 0, 0.05), [0.6, 0.01, 0.0])
+    X_WE = [RigidTransform(RollPitchYaw(np.pi, 0.1 * s, 0.2 * s), [0.4 + 0.1 * s, 0.05 * s, 0.4 - 0.2 * s])
+            for s in np.linspace(0, 1, n)]
+    X_OE_raw = object_frame_poses(_vec(X_WO), np.array([_vec(X) for X in X_WE]))
+    idx, t10, X_OE = downsample_action(t, X_OE_raw)
+    m = idx.size
+    extra = {}
+    if perception:
+        extra = dict(object_points=rng.normal(size=(m, 2048, 3)).astype(np.float32),
+                     perception_valid=rng.uniform(size=m) > 0.1,
+                     X_WO_start=_vec(X_WO) + np.r_[0.002, -0.001, 0, 0, 0, 0, 0])
+    return Demonstration(
+        skill=skill, seed=seed, success=True, final_object_state=1.6,
+        times_100hz=t, X_OE_100hz=X_OE_raw, q_100hz=rng.normal(size=(n, 7)),
+        gripper_100hz=np.zeros(n), object_state_100hz=np.linspace(0, 1.6, n),
+        times=t10, X_OE=X_OE, X_WO_true=_vec(X_WO),
+        metadata={"source": "test", "variation": {"pause_s": 0.25}}, **extra)
+
+
+def _assert_same(a: Demonstration, b: Demonstration):
+    for f in ("skill", "seed", "success", "final_object_state", "metadata"):
+        assert getattr(a, f) == getattr(b, f), f
+    for f in ("times_100hz", "X_OE_100hz", "q_100hz", "gripper_100hz", "object_state_100hz",
+              "times", "X_OE", "X_WO_true", "X_WO_start", "object_points", "perception_valid"):
+        x, y = getattr(a, f), getattr(b, f)
+        if x is None:
+            assert y is None, f
+            continue
+        assert x.dtype == y.dtype and x.shape == y.shape, f
+        assert np.array_equal(x, y), f
+
+
+@pytest.mark.parametrize("perception", [True, False])
+def test_round_trip_is_exact(tmp_path, perception):
+    demo = make_demo(perception=perception)
+    path = save_demonstration(demo, demo_path(tmp_path, 0))
+    assert path.name == "demo_000.npz"
+    back = load_demonstration(path)
+    _assert_same(demo, back)
+    assert back.path == str(path) and demo.path is None
+    assert back.has_perception is perception
+    assert back.n_samples == 13 and back.duration == pytest.approx(1.2)
+    # Readable with plain numpy, no pickle; metadata is JSON with units and frames.
+    with np.load(path, allow_pickle=False) as data:
+        meta = json.loads(data["metadata"].item())
+        assert data["object_points"].shape == (13, 2048, 3) if perception else "object_points" not in data
+    assert meta["schema_version"] == SCHEMA_VERSION
+    assert meta["units"]["X_OE"].startswith("m") and "object frame" in meta["frames"]["X_OE"]
+    assert meta["rates_hz"] == {"action_raw": 100.0, "action": 10.0, "perception": 10.0}
+
+
+def test_existing_file_is_not_overwritten_without_force(tmp_path):
+    path = save_demonstration(make_demo(seed=1), tmp_path / "demo_000.npz")
+    before = path.read_bytes()
+    with pytest.raises(FileExistsError, match="demo_000.npz exists"):
+        save_demonstration(make_demo(seed=2), path)
+    assert path.read_bytes() == before
+    save_demonstration(make_demo(seed=2), path, force=True)
+    assert load_demonstration(path).seed == 2
+
+
+def test_invalid_demo_is_refused_before_writing(tmp_path):
+    demo = make_demo()
+    demo.X_OE[3, 0] = np.nan
+    path = tmp_path / "demo_000.npz"
+    with pytest.raises(DemonstrationError, match=r"demo_000.npz: field 'X_OE' contains NaN .*index \(3, 0\)"):
+        save_demonstration(demo, path)
+    assert not path.exists()
+
+
+def _write_arrays(path, arrays):
+    np.savez(path, **arrays)
+    return path
+
+
+@pytest.mark.parametrize("mutate,field,message", [
+    (lambda a: a.update(X_OE_100hz=a["X_OE_100hz"][:, :6]), "X_OE_100hz", r"shape \(121, 6\); expected \(121, 7\)"),
+    (lambda a: a["q_100hz"].__setitem__((5, 2), np.inf), "q_100hz", "NaN or inf"),
+    (lambda a: a["X_OE"].__setitem__((2, 3), 2.0), "X_OE", "quaternion of norm .* at sample 2"),
+    (lambda a: a["times"].__setitem__(4, a["times"][3]), "times", r"not strictly increasing \(t\[3\]"),
+    (lambda a: a.update(times=a["times"][:9], X_OE=a["X_OE"][:9], object_points=a["object_points"][:9],
+                        perception_valid=a["perception_valid"][:9]), "times", "9 samples; expected at least 10"),
+    (lambda a: a.update(object_points=a["object_points"].astype(np.float64)), "object_points", "float32"),
+    (lambda a: a.update(skill=np.array("juggle")), "skill", "'juggle'; expected one of open, close, draw"),
+    (lambda a: a.pop("X_WO_true"), "X_WO_true", "is missing"),
+    (lambda a: a.pop("perception_valid"), "perception_valid", "is missing"),
+])
+def test_loader_names_file_and_field(tmp_path, mutate, field, message):
+    arrays = make_demo().to_arrays()
+    mutate(arrays)
+    path = _write_arrays(tmp_path / "demo_007.npz", arrays)
+    with pytest.raises(DemonstrationError) as err:
+        load_demonstration(path)
+    text = str(err.value)
+    assert text.startswith(f"{path}: field '{field}'"), text
+    assert re.search(message, text), text
+
+
+def test_wrong_schema_version_is_refused(tmp_path):
+    arrays = make_demo().to_arrays()
+    meta = json.loads(arrays["metadata"].item())
+    meta["schema_version"] = SCHEMA_VERSION + 1
+    arrays["metadata"] = np.array(json.dumps(meta))
+    path = _write_arrays(tmp_path / "demo_000.npz", arrays)
+    with pytest.raises(DemonstrationError, match=rf"demo_000.npz: field 'metadata.schema_version' is "
+                                                 rf"{SCHEMA_VERSION + 1}; this drake-skill reads version 1"):
+        load_demonstration(path)
+
+
+def test_foreign_npz_is_refused(tmp_path):
+    path = _write_arrays(tmp_path / "demo_000.npz", {"x": np.arange(3)})
+    with pytest.raises(DemonstrationError, match="demo_000.npz: field 'metadata' is missing; not a drake-skill"):
+        load_demonstration(path)
+
+
+def test_truncated_and_garbage_files_are_refused(tmp_path):
+    good = save_demonstration(make_demo(), tmp_path / "good.npz").read_bytes()
+    truncated = tmp_path / "demo_000.npz"
+    truncated.write_bytes(good[: len(good) // 2])
+    with pytest.raises(ValueError, match=r"demo_000.npz: not a readable numpy .npz archive"):
+        load_demonstration(truncated)
+    garbage = tmp_path / "demo_001.npz"
+    garbage.write_bytes(np.random.default_rng(0).bytes(5000))
+    with pytest.raises(ValueError, match=r"demo_001.npz: not a readable numpy .npz archive"):
+        load_demonstration(garbage)
+    # A flipped byte inside a member: the zip CRC check catches it.
+    flipped = bytearray(good)
+    with zipfile.ZipFile(tmp_path / "good.npz") as z:
+        info = z.getinfo("X_OE_100hz.npy")
+    flipped[info.header_offset + 30 + len(info.filename) + 200] ^= 0xFF
+    bad = tmp_path / "demo_002.npz"
+    bad.write_bytes(bytes(flipped))
+    with pytest.raises(ValueError, match=r"demo_002.npz"):
+        load_demonstration(bad)
+
+
+def test_pickled_object_arrays_are_never_loaded(tmp_path):
+    arrays = make_demo().to_arrays()
+    arrays["metadata"] = np.array([{"schema": "x"}], dtype=object)
+    path = tmp_path / "demo_000.npz"
+    np.savez(path, **arrays)
+    with pytest.raises(ValueError, match="demo_000.npz: not a readable numpy .npz archive.*allow_pickle"):
+        load_demonstration(path)
+
+
+def test_load_demonstrations_sorted_and_checked(tmp_path):
+    for i in (2, 0, 1):
+        save_demonstration(make_demo(seed=10 + i), demo_path(tmp_path, i))
+    (tmp_path / "notes.txt").write_text("not a demo")
+    demos = load_demonstrations(tmp_path, skill="open")
+    assert [d.seed for d in demos] == [10, 11, 12]
+    with pytest.raises(DemonstrationError, match=r"demo_000.npz: field 'skill' is 'open'; expected 'close'"):
+        load_demonstrations(tmp_path, skill="close")
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(FileNotFoundError, match="empty: no demo_"):
+        load_demonstrations(tmp_path / "empty")
+
+
+def test_object_frame_poses_match_drake():
+    X_WO = RigidTransform(RollPitchYaw(0.1, -0.2, 0.7), [0.5, 0.1, 0.02])
+    X_WE = [RigidTransform(RollPitchYaw(2.0, 0.3, -1.0 + 0.5 * k), [0.3, -0.2 + 0.1 * k, 0.4]) for k in range(4)]
+    ours = object_frame_poses(_vec(X_WO), np.array([_vec(X) for X in X_WE]))
+    for k, X in enumerate(X_WE):
+        expected = X_WO.inverse() @ X
+        np.testing.assert_allclose(ours[k, :3], expected.translation(), atol=1e-12)
+        q = expected.rotation().ToQuaternion().wxyz()
+        assert abs(abs(ours[k, 3:] @ q) - 1.0) < 1e-12
+    assert np.all(np.sum(ours[1:, 3:] * ours[:-1, 3:], axis=1) > 0)   # continuous signs
+
+
+def test_downsample_action_takes_every_tenth_and_the_last():
+    t = np.arange(106) / 100.0
+    X = np.tile(np.r_[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], (106, 1))
+    X[:, 0] = t
+    idx, t10, X10 = downsample_action(t, X)
+    assert idx.tolist() == [0, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 105]
+    np.testing.assert_array_equal(t10, t[idx])
+    np.testing.assert_array_equal(X10[:, 0], t[idx])
