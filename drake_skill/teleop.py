@@ -348,7 +348,7 @@ class TeleopSession:
             self.simulator.AdvanceTo(t + config.period)
         perception = make_perception(self.station) if config.record_perception else None
         recorder = StationRecorder(self.station, self.context, self.simulator, 100.0, 10.0,
-                                   perception, perception_seed=seed)
+                                   perception)
         t_start = recorder.anchor()
         status(f"recording from t = {t_start:.2f} s")
         gripper = self.teleop.GetOutputPort("gripper_command")

@@ -18,6 +18,7 @@ from drake_skill.demonstrator import (
     make_perception,
     pose_to_vector,
 )
+from drake_skill.object_segmenter import ObjectSegmenter, segmenter_config_for_station
 from drake_skill.pose_source import hold_plan
 from drake_skill.scripted import keyframes, scripted_plan
 from drake_skill.simulation import StationSimulation
@@ -156,7 +157,7 @@ def test_perception_is_recorded_at_10_hz_on_the_action_instants():
     X_WO = sim.reset(5)
     sim.set_plan(hold_plan(sim.home_pose()))
     recorder = StationRecorder(sim.station, sim.context, sim.simulator, 100.0, 10.0,
-                               make_perception(sim.station), perception_seed=5)
+                               make_perception(sim.station))
     assert recorder.anchor() == 0.0
     for _ in range(101):
         recorder.sample(0.0)
@@ -171,5 +172,28 @@ def test_perception_is_recorded_at_10_hz_on_the_action_instants():
     # The points are the box: inside its footprint in the object frame (closed box, 20 x 30 cm-ish).
     p_O = (np.asarray(X_WO.inverse().GetAsMatrix4()) @ np.c_[demo.object_points[3], np.ones(2048)].T)[:3].T
     assert np.all(np.abs(p_O[:, :2]) < 0.25) and p_O[:, 2].min() > 0.0 and p_O[:, 2].max() < 0.2
-    # Frames differ only by the resampling seed (nothing moves).
-    assert not np.array_equal(demo.object_points[0], demo.object_points[1])
+    # The ObjectSegmenter system that executions use gives the same points for the last frame.
+    segmenter = ObjectSegmenter(segmenter_config_for_station(sim.config))
+    seg_context = segmenter.CreateDefaultContext()
+    cloud = sim.station.GetOutputPort("point_cloud").Eval(sim.station_context())
+    segmenter.get_point_cloud_input_port().FixValue(seg_context, cloud)
+    points = segmenter.get_object_points_output_port().Eval(seg_context)
+    np.testing.assert_array_equal(np.asarray(points, dtype=np.float32), demo.object_points[-1])
+
+
+def test_cli_records_files_table_and_plot_and_never_overwrites(tmp_path, capsys):
+    from drake_skill.demos_cli import main
+
+    out = tmp_path / "draw"
+    assert main(["record", "--skill", "draw", "--count", "1", "--seed", "1", "--no-camera", "--quiet",
+                 "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "demo_000.npz" in printed and "yes" in printed and f"wrote 1 demonstration(s) to {out}" in printed
+    demo = load_demonstration(out / "demo_000.npz")
+    assert demo.skill == "draw" and demo.success and demo.seed >= 1
+    png = (out / "demos.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
+    before = (out / "demo_000.npz").read_bytes()
+    assert main(["record", "--skill", "draw", "--count", "1", "--no-camera", "--out", str(out)]) == 1
+    assert "already holds 1 demonstration file(s) (demo_000.npz); pass --force" in capsys.readouterr().err
+    assert (out / "demo_000.npz").read_bytes() == before
