@@ -202,6 +202,7 @@ def scenario_for_skill(skill: str) -> StationConfig:
     if skill == "open":
         config.object.x = 0.62
     elif skill == "close":
+        config.object.x = 0.52
         config.object.initial_joint = 1.9
     elif skill == "draw":
         config.object.kind = "drawer"
