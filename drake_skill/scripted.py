@@ -96,8 +96,8 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
         frames += [(2.5, np.array([gap_x, 0.0, 0.30]), R, 0.0),
                    (3.5, np.array([gap_x, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
                    (4.0, np.array([gap_x, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
-                   (7.0, np.array([gap_x - 0.17, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
-                   (8.0, np.array([gap_x - 0.17, 0.0, 0.30]), R, 0.0)]
+                   (7.0, np.array([gap_x - 0.20, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
+                   (8.0, np.array([gap_x - 0.20, 0.0, 0.30]), R, 0.0)]
     else:
         raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
     return frames
