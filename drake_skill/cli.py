@@ -3,6 +3,8 @@
 Subcommands (``drake-skill <command> --help`` for each):
 
   station-demo   scripted Open, Close and Draw in the simulated station
+  demos record   record demonstrations (scripted or interactive in Meshcat)
+  fit            fit a skill from demonstrations
   bench NAME     benchmarks: station, dmp, perception, reward (``--json``)
 
 Every subcommand's module has a ``main(argv) -> int``; this file only
@@ -16,6 +18,8 @@ import sys
 
 COMMANDS = {
     "station-demo": ("drake_skill.station_demo", "scripted Open/Close/Draw in the simulated station"),
+    "demos": ("drake_skill.demos_cli", "record demonstrations: demos record --skill open --count 3 --out DIR"),
+    "fit": ("drake_skill.fit_cli", "fit a skill (DMPs + goal model) from demonstrations"),
     "bench": (None, "benchmarks: station, dmp, perception, reward"),
 }
 BENCHES = ("station", "dmp", "perception", "reward")
