@@ -39,6 +39,8 @@ R_OE_DOWN = RotationMatrix(np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.
 LID_HINGE_XZ = np.array([0.10, 0.13])   # models/box.sdf
 FINGER_HALF_THICKNESS = 0.011
 TCP_TO_TIP = 0.009                      # fingertips are 9 mm past the TCP
+# Where the fingertip stops under the lid's lip (x in O; the lip spans -0.125..-0.100).
+UNDER_LIP_X = -0.109
 
 
 def _arc(theta, radius):
@@ -59,7 +61,7 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
         z_E, x_E = R.col(2), R.col(0)
         tip_offset = (TCP_TO_TIP * z_E + FINGER_HALF_THICKNESS * x_E)[[0, 2]]  # TCP -> tip's upper edge
         radius, push = 0.209, 0.010
-        under_lip = _xyz(np.array([-0.109, 0.123]) - tip_offset)
+        under_lip = _xyz(np.array([UNDER_LIP_X, 0.123]) - tip_offset)
         # Turn the hand at height first: descending while turning folds the
         # elbow into joint 4's limit.
         frames += [(1.5, under_lip + [0.0, 0.0, 0.16], R, 0.0),
