@@ -98,8 +98,11 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
         frames += [(2.5, np.array([gap_x, 0.0, 0.30]), R, 0.0),
                    (3.5, np.array([gap_x, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
                    (4.0, np.array([gap_x, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
-                   (7.0, np.array([gap_x - 0.20, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
-                   (8.0, np.array([gap_x - 0.20, 0.0, 0.30]), R, 0.0)]
+                   (7.0, np.array([gap_x - 0.19, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
+                   # lift clear of the handle (never pushing the drawer back), then
+                   # away from the robot's base, where the arm can settle
+                   (8.0, np.array([gap_x - 0.20, 0.0, 0.22]), R, 0.0),
+                   (8.8, np.array([gap_x - 0.14, 0.0, 0.32]), R, 0.0)]
     else:
         raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
     return frames
