@@ -28,7 +28,7 @@ def draw_setup():
                       for p in log.ee_pose])
     poses[:, 3:] = make_quaternions_continuous(poses[:, 3:])
     times, poses = resample_demonstration(log.times, poses, rate_hz=10)
-    dmp_config = DmpConfig(n_basis=9)
+    dmp_config = DmpConfig(n_basis=30)   # enough bases to thread the finger behind the handle
     dmp = fit_dmp(times, poses, dmp_config)
     runner = RolloutRunner(config, dmp, dmp_config, skill="draw", record_hz=10)
     return dmp, runner, (times, poses)
