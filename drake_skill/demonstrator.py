@@ -49,6 +49,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_skill.demonstrations import Demonstration, downsample_action, object_frame_poses
 from drake_skill.pose_source import PosePlan
+from drake_skill.simulation import DivergedError, StationSimulation, pose_to_vector
 from drake_skill.station_config import SKILLS, StationConfig, scenario_for_skill
 
 #: Thesis section 6.2: demonstrations per skill.
@@ -152,11 +153,6 @@ def load_demonstrator_config(path=None, *, data: str | None = None) -> Demonstra
     except RuntimeError as e:
         raise ValueError(f"demonstrator config ({path or 'YAML'}): {e}") from e
     return config.validate()
-
-
-def pose_to_vector(X: RigidTransform) -> np.ndarray:
-    """[x, y, z, qw, qx, qy, qz] of a RigidTransform."""
-    return np.r_[X.translation(), X.rotation().ToQuaternion().wxyz()]
 
 
 # --------------------------------------------------------------------------- variation
@@ -323,7 +319,6 @@ class StationRecorder:
             self.simulator.AdvanceTo(max(t, self.root_context.get_time()))
         state = self._ports["panda_state"].Eval(self.context)
         if not np.all(np.isfinite(state)):
-            from drake_skill.simulation import DivergedError
             raise DivergedError(f"simulation diverged at t = {t:.3f} s")
         self.X_WE.append(pose_to_vector(self._ports["ee_pose"].Eval(self.context)))
         self.q.append(state[:7].copy())
@@ -397,7 +392,6 @@ class ScriptedDemonstrator:
 
     def __init__(self, skill: str, config: DemonstratorConfig | None = None,
                  station_config: StationConfig | None = None, meshcat=None):
-        from drake_skill.simulation import StationSimulation
 
         if skill not in SKILLS:
             raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")

@@ -156,36 +156,25 @@ def _capsule(name, p0, p1, radius, color, collision=True) -> str:
         pitch = math.acos(max(-1.0, min(1.0, dz / length)))
         yaw = math.atan2(dy, dx)
         rpy = (0.0, pitch, yaw)
-    geom = f"<capsule><radius>{radius}</radius><length>{length:.6g}</length></capsule>"
     mesh_name = f"meshes/{name}.obj"
     MESHES[mesh_name] = capsule_obj(radius, length)
-    out = f"""      <visual name="{name}_visual">
-        <pose>{_pose(centre, rpy)}</pose>
-        <geometry><mesh><uri>package://drake_skill_models/{mesh_name}</uri></mesh></geometry>
-        <material><diffuse>{color}</diffuse></material>
-      </visual>
-"""
-    if collision:
-        out += f"""      <collision name="{name}_collision">
-        <pose>{_pose(centre, rpy)}</pose>
-        <geometry>{geom}</geometry>
-      </collision>
-"""
-    return out
+    return _geometry(name, centre, rpy, color,
+                     visual_geom=f"<mesh><uri>package://drake_skill_models/{mesh_name}</uri></mesh>",
+                     collision_geom=(f"<capsule><radius>{radius}</radius><length>{length:.6g}</length></capsule>"
+                                     if collision else None))
 
 
-def _box(name, centre, size, color, rpy=(0.0, 0.0, 0.0), collision=True, visual=True,
-         friction=None) -> str:
-    geom = "<box><size>{}</size></box>".format(" ".join(f"{s:.6g}" for s in size))
+def _geometry(name, centre, rpy, color, visual_geom, collision_geom, friction=None) -> str:
+    """An SDF visual (when ``visual_geom``) and collision (when ``collision_geom``) at one pose."""
     out = ""
-    if visual:
+    if visual_geom:
         out += f"""      <visual name="{name}_visual">
         <pose>{_pose(centre, rpy)}</pose>
-        <geometry>{geom}</geometry>
+        <geometry>{visual_geom}</geometry>
         <material><diffuse>{color}</diffuse></material>
       </visual>
 """
-    if collision:
+    if collision_geom:
         fr = ""
         if friction is not None:
             fr = f"""
@@ -195,27 +184,21 @@ def _box(name, centre, size, color, rpy=(0.0, 0.0, 0.0), collision=True, visual=
         </drake:proximity_properties>"""
         out += f"""      <collision name="{name}_collision">
         <pose>{_pose(centre, rpy)}</pose>
-        <geometry>{geom}</geometry>{fr}
+        <geometry>{collision_geom}</geometry>{fr}
       </collision>
 """
     return out
+
+
+def _box(name, centre, size, color, rpy=(0.0, 0.0, 0.0), collision=True, visual=True,
+         friction=None) -> str:
+    geom = "<box><size>{}</size></box>".format(" ".join(f"{s:.6g}" for s in size))
+    return _geometry(name, centre, rpy, color, geom if visual else None, geom if collision else None, friction)
 
 
 def _cylinder(name, centre, radius, length, color, rpy=(0.0, 0.0, 0.0), collision=True) -> str:
     geom = f"<cylinder><radius>{radius}</radius><length>{length}</length></cylinder>"
-    out = f"""      <visual name="{name}_visual">
-        <pose>{_pose(centre, rpy)}</pose>
-        <geometry>{geom}</geometry>
-        <material><diffuse>{color}</diffuse></material>
-      </visual>
-"""
-    if collision:
-        out += f"""      <collision name="{name}_collision">
-        <pose>{_pose(centre, rpy)}</pose>
-        <geometry>{geom}</geometry>
-      </collision>
-"""
-    return out
+    return _geometry(name, centre, rpy, color, geom, geom if collision else None)
 
 
 def _box_inertia(mass, size):
