@@ -188,6 +188,10 @@ class PointCloudAutoencoder(nn.Module):
         self._folded = None  # BatchNorm statistics may change: refold on next use.
         return super().train(mode)
 
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        self._folded = None
+        return super().load_state_dict(state_dict, strict=strict, assign=assign)
+
     def encode_fast(self, x: torch.Tensor) -> torch.Tensor:
         """Eval-mode encoder with BatchNorm folded into the Linear layers. (B, N, 3) -> (B, 128)."""
         if self.training:
@@ -245,7 +249,7 @@ def _torch_threads(n: int | None):
 
 
 def weight_decay_groups(model: nn.Module, weight_decay: float) -> list[dict]:
-    """Adam parameter groups: L2 on Linear weight matrices only (as Achlioptas et al.), none on biases/BatchNorm."""
+    """Adam parameter groups: L2 ``weight_decay`` on the Linear weight matrices, none on biases and BatchNorm."""
     linear_weights = {id(m.weight) for m in model.modules() if isinstance(m, nn.Linear)}
     decay = [p for p in model.parameters() if id(p) in linear_weights]
     no_decay = [p for p in model.parameters() if id(p) not in linear_weights]

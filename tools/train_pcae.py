@@ -12,7 +12,18 @@ held-out set uses a different seed (``--heldout-seed``).
 
 Optimisation (thesis 3.5): Chamfer loss on normalised clouds (the thesis'
 EMD is too slow on a CPU; Chamfer is the accepted stand-in, METHOD.md 3),
-Adam with lr 5e-4, L2 weight decay 1e-3 on the Linear weight matrices.
+Adam with lr 5e-4, batch 16.
+
+Weight decay: the thesis lists L2 regularisation with lambda = 1e-3, the value
+of the ``weight_decay=0.001`` argument in Achlioptas et al.'s released code
+(optas/latent_3d_points, src/encoders_decoders.py). There it is inert: the
+layers are built with ``regularizer=None`` and ae_templates.py never sets one,
+so the reference PCAE trains with no weight decay. On this project's CPU
+budget, 1e-3 (Adam-coupled L2 on the Linear weights) held the reconstructions
+at a blob: training Chamfer 0.025 (normalised) after 18 epochs, held-out
+1226 mm^2 Chamfer and 104 mm EMD, against 0.020 after 5 epochs without it.
+The default is therefore 0 (the reference behaviour); ``--weight-decay 1e-3``
+gives the thesis' literal setting.
 
 Deterministic for a given seed, thread count and CPU: weights are initialised
 from ``torch.manual_seed(seed)``, the batch order of epoch e from a generator
@@ -24,7 +35,7 @@ data recipe, seeds, sizes, epochs, wall time, held-out Chamfer and EMD, input
 normalisation).
 
 Usage: ``python tools/train_pcae.py --out models/`` (defaults reproduce the
-shipped model; 30-45 minutes on 2 shared CPU threads). ``--smoke`` runs a tiny
+shipped model; 25-50 minutes on 2 CPU threads shared with other work). ``--smoke`` runs a tiny
 configuration in about a minute.
 """
 
@@ -55,11 +66,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--work", type=Path, default=Path("build/pcae_train"), help="checkpoint folder (resumed if present)")
     p.add_argument("--seed", type=int, default=2024, help="seed of the training stream and of the weights")
     p.add_argument("--heldout-seed", type=int, default=7, help="seed of the held-out clouds")
-    p.add_argument("--epochs", type=int, default=10)
+    p.add_argument("--epochs", type=int, default=18)
     p.add_argument("--clouds-per-epoch", type=int, default=2000)
     p.add_argument("--batch-size", type=int, default=16)
     p.add_argument("--lr", type=float, default=5e-4)
-    p.add_argument("--weight-decay", type=float, default=1e-3)
+    p.add_argument("--weight-decay", type=float, default=0.0, help="L2 on Linear weights (Adam-coupled); see the docstring")
     p.add_argument("--heldout", type=int, default=256, help="held-out clouds for Chamfer")
     p.add_argument("--emd-clouds", type=int, default=64, help="held-out clouds (first ones) for exact EMD on all 2048 points")
     p.add_argument("--val", type=int, default=64, help="held-out clouds evaluated after every epoch")
@@ -235,7 +246,8 @@ def main(argv=None) -> int:
         "training": {
             **recipe(args),
             "loss": "Chamfer (mean squared nearest-neighbour distance, both directions) on normalised clouds",
-            "optimizer": "Adam, L2 weight decay on Linear weight matrices only",
+            "optimizer": "Adam; L2 weight decay (weight_decay, Adam-coupled) on Linear weight matrices only",
+            "weight_decay_note": "thesis 3.5 lists 1e-3, but Achlioptas et al.'s reference code builds its layers with regularizer=None, so no decay is applied there; 1e-3 stalled training on this budget (see tools/train_pcae.py)",
             "wall_time_s": wall_before,
             "history": history,
             "torch": torch.__version__,
