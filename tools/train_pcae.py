@@ -35,7 +35,7 @@ data recipe, seeds, sizes, epochs, wall time, held-out Chamfer and EMD, input
 normalisation).
 
 Usage: ``python tools/train_pcae.py --out models/`` (defaults reproduce the
-shipped model; 25-50 minutes on 2 CPU threads shared with other work). ``--smoke`` runs a tiny
+shipped model; about 20 minutes of training on 2 CPU threads shared with other work, 12 alone, plus 2-3 minutes of evaluation). ``--smoke`` runs a tiny
 configuration in about a minute.
 """
 
