@@ -41,6 +41,8 @@ FINGER_HALF_THICKNESS = 0.011
 TCP_TO_TIP = 0.009                      # fingertips are 9 mm past the TCP
 # Where the fingertip stops under the lid's lip (x in O; the lip spans -0.125..-0.100).
 UNDER_LIP_X = -0.109
+# Close: the hand's lean toward the robot per radian the lid is below 1.4 rad (up to 0.8).
+CLOSE_LEAN = 0.8
 
 
 def _arc(theta, radius):
@@ -76,22 +78,31 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
         frames += [(8.5, last + [0.0, 0.0, 0.06], R, 0.0),
                    (9.5, last + [-0.15, 0.0, 0.08], R, 0.0)]
     elif skill == "close":
-        R = R_OE_DOWN
         radius, push = 0.19, 0.010
         theta0 = 1.75
+
+        def hand(theta):
+            # Below ~80 degrees the hand leans toward the robot, so its body
+            # stays clear of the lid's rising front part (pointing straight
+            # down, the hand body jams on the lid below ~60 degrees).
+            return RotationMatrix.MakeYRotation(CLOSE_LEAN * min(max(1.4 - theta, 0.0), 0.8)) @ R_OE_DOWN
+
         def tcp(theta):
             n = np.array([np.sin(theta), np.cos(theta)])         # lid's outer normal (x, z)
             face = _arc(theta, radius) + 0.02 * n               # point on the outer face
             tip = face + n * (FINGER_HALF_THICKNESS * abs(n[0]) - push)
-            return _xyz(tip + [0.0, TCP_TO_TIP])
+            z_E = hand(theta).col(2)
+            return _xyz(tip) - TCP_TO_TIP * z_E
+
         start = tcp(theta0) + [0.03, 0.0, 0.0]
-        frames += [(2.5, start + [0.0, 0.0, 0.10], R, 0.0),
-                   (3.5, start, R, 0.0),
-                   (4.0, start, R, 0.0)]
+        frames += [(2.5, start + [0.0, 0.0, 0.10], hand(theta0), 0.0),
+                   (3.5, start, hand(theta0), 0.0),
+                   (4.0, start, hand(theta0), 0.0)]
         for i, theta in enumerate(np.linspace(theta0, -0.05, 10)[1:]):
-            frames.append((4.0 + 0.5 * (i + 1), tcp(theta), R, 0.0))
+            frames.append((4.0 + 0.5 * (i + 1), tcp(theta), hand(theta), 0.0))
         last = frames[-1][1]
-        frames += [(9.5, last + [0.0, 0.0, 0.12], R, 0.0)]
+        # leave up and toward the hinge: lifting straight up can catch the lip
+        frames += [(9.5, last + [0.06, 0.0, 0.12], hand(0.0), 0.0)]
     elif skill == "draw":
         R = R_OE_DOWN
         gap_x, tip_z = -0.173, 0.115

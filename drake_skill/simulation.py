@@ -91,8 +91,8 @@ class StationSimulation:
         self.source.set_plan(self.source.GetMyMutableContextFromRoot(self.context),
                              hold_plan(home, self.config.gripper_home))
         self.simulator.Initialize()
-        # Process the events due at t = 0 (the camera's first frame) so the
-        # held images are valid before the first step.
+        # Process the events due at t = 0 (periodic perception systems sample
+        # their first frame then) before the first step.
         self.simulator.AdvanceTo(0.0)
         return self._X_WO
 

@@ -9,8 +9,11 @@ inputs
     ``ee_pose_desired``  RigidTransform X_WE, world pose of the hand's TCP frame E
     ``gripper_command``  [1] finger opening [m]
 outputs
-    ``point_cloud``      PointCloud (world frame, xyz + rgb), at the camera rate
+    ``point_cloud``      PointCloud (world frame, xyz + rgb; 640 x 480 organised,
+                         NaN/inf where there is no return)
     ``color_image``, ``depth_image`` (32F, m), ``label_image``
+                         rendered on demand: the perception systems sample them
+                         at ``camera.fps`` (10 Hz), the Kinect's rate in the thesis
     ``panda_state``      [14] joint positions [rad] and velocities [rad/s]
     ``ee_pose``          RigidTransform X_WE measured
     ``object_state``     [1] lid angle [rad] or drawer travel [m]: ground truth,
@@ -48,9 +51,9 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import PdControllerGains
-from pydrake.perception import BaseField, DepthImageToPointCloud, Fields, PointCloud
+from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantValueSource, MatrixGain, ZeroOrderHold
+from pydrake.systems.primitives import ConstantValueSource, MatrixGain
 from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
 from pydrake.common.value import AbstractValue, Value
 
@@ -210,36 +213,24 @@ class Station(Diagram):
         self._X_WC = look_at(cam.position, cam.target)
         sensor = builder.AddNamedSystem("camera", RgbdSensor(world_id, self._X_WC, color, depth))
         builder.Connect(self.scene_graph.get_query_output_port(), sensor.query_object_input_port())
-        # Sample-and-hold at the camera rate: at each tick the colour and depth
-        # images are rendered once (the sensor caches them) and the point cloud
-        # is computed from them; between ticks nothing is recomputed. (Drake's
-        # RgbdSensorDiscrete would also hold a 16-bit depth image, a third
-        # render per frame.)
-        period = 1.0 / cam.fps
+        # Rendering is on demand: an image or the cloud is rendered when a
+        # consumer evaluates it, once per state (the sensor caches it), so the
+        # camera costs nothing between the frames the perception systems sample
+        # at camera.fps. (Holding the images in a ZeroOrderHold instead cost
+        # ~10 ms per frame in state copies; Drake's RgbdSensorDiscrete would also
+        # render a 16-bit depth image.)
         to_cloud = builder.AddNamedSystem("depth_to_cloud", DepthImageToPointCloud(
             info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
         builder.Connect(sensor.depth_image_32F_output_port(), to_cloud.depth_image_input_port())
         builder.Connect(sensor.color_image_output_port(), to_cloud.color_image_input_port())
-        # The camera is fixed in the world: a constant pose.
+        # The camera is fixed in the world: a constant pose keeps the cloud's
+        # cache independent of the robot's state.
         camera_pose = builder.AddNamedSystem("camera_pose", ConstantValueSource(AbstractValue.Make(self._X_WC)))
         builder.Connect(camera_pose.get_output_port(), to_cloud.camera_pose_input_port())
-        # Before the first tick the held cloud is organised like the camera's,
-        # with no returns (NaN), as a camera that has not seen anything yet.
-        empty_cloud = PointCloud(cam.width * cam.height, Fields(BaseField.kXYZs | BaseField.kRGBs))
-        empty_cloud.mutable_xyzs()[:] = np.nan
-        empty_cloud.mutable_rgbs()[:] = 0
-        held = {}
-        for name, port, model in (
-                ("color_image", sensor.color_image_output_port(), None),
-                ("depth_image", sensor.depth_image_32F_output_port(), None),
-                ("point_cloud", to_cloud.point_cloud_output_port(), AbstractValue.Make(empty_cloud))):
-            zoh = builder.AddNamedSystem(f"{name}_hold", ZeroOrderHold(period, model or port.Allocate()))
-            builder.Connect(port, zoh.get_input_port())
-            held[name] = zoh.get_output_port()
-        for name, port in held.items():
-            builder.ExportOutput(port, name)
-        # The label image (ground truth for tests and data generation) is not
-        # held: it renders only when somebody evaluates it.
+        builder.ExportOutput(to_cloud.point_cloud_output_port(), "point_cloud")
+        builder.ExportOutput(sensor.color_image_output_port(), "color_image")
+        builder.ExportOutput(sensor.depth_image_32F_output_port(), "depth_image")
+        # The label image is ground truth for tests and data generation.
         builder.ExportOutput(sensor.label_image_output_port(), "label_image")
         self.camera_info = info
 

@@ -96,8 +96,9 @@ def test_deterministic_across_resets_and_plane_fitted_once(close_rig):
     rig = close_rig
 
     def run(seed):
-        rig.reset(seed)
+        rig.diagram.SetDefaultContext(rig.context)
         assert rig.segmenter.table_plane(rig.seg_context) is None     # not stored before the first update
+        rig.reset(seed)                                               # processes the frame at t = 0
         xyz, _ = _cloud_arrays(rig)
         first_plane = fit_table_plane(xyz, rig.segmenter.config.segmentation, (480, 640),
                                       seed=rig.segmenter.config.seed)
