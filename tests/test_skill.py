@@ -145,3 +145,21 @@ def test_goal_pipeline_in_the_diagram_rewards_closing_over_parking(close_skill):
     assert R / len(G) > 3 * parked_R / len(parked_G)
     # The system's return is the numpy POMRP's on the same goal data.
     assert R == pytest.approx(close_skill.dense_return(G))
+
+
+def test_fit_cli_writes_skill_and_pictures(close_data, tmp_path, capsys):
+    from drake_skill.cli import main
+    from drake_skill.demonstrations import save_demonstration
+
+    demos, _, _ = close_data
+    for i, demo in enumerate(demos):
+        save_demonstration(demo, tmp_path / "demos" / f"demo_{i:03d}.npz")
+    out = tmp_path / "skill"
+    assert main(["fit", "--demos", str(tmp_path / "demos"), "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "goal HMM" in printed and "explained variance" in printed
+    for name in ("skill.yaml", "skill.json", "arrays.npz", "pcae.safetensors", "goal_model.png", "demo_returns.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert Skill.load(out).name == "close"
+    with pytest.raises(SystemExit):          # never replaces a skill without --force
+        main(["fit", "--demos", str(tmp_path / "demos"), "--out", str(out)])
