@@ -14,6 +14,7 @@ dispatches, so ``--help`` texts live beside the code they describe.
 from __future__ import annotations
 
 import importlib
+import logging
 import sys
 
 COMMANDS = {
@@ -29,12 +30,47 @@ def _usage() -> str:
     lines = ["usage: drake-skill <command> [options]", "", "Robot skill learning from very few "
              "demonstrations, as a Drake diagram.", "", "commands:"]
     lines += [f"  {name:<14}{text}" for name, (_, text) in COMMANDS.items()]
-    lines += ["", "Run 'drake-skill <command> --help' for a command's options."]
+    lines += ["", "Run 'drake-skill <command> --help' for a command's options.",
+              "--verbose (any command) also prints differential IK's unreachable-pose warnings."]
     return "\n".join(lines)
+
+
+class _QuietDiffIk(logging.Filter):
+    """Counts, instead of printing, differential IK's "no solution"/"stuck" warnings.
+
+    They come whenever a commanded hand pose is out of reach (a DMP exploring
+    far from the demonstrations does that); one line per episode drowns the
+    progress bars. ``--verbose`` shows them all.
+    """
+
+    def __init__(self):
+        super().__init__()
+        self.count = 0
+
+    def filter(self, record):
+        if "Differential IK" in record.getMessage():
+            self.count += 1
+            return False
+        return True
 
 
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    quiet = _QuietDiffIk()
+    if "--verbose" in argv:
+        argv.remove("--verbose")
+    else:
+        logging.getLogger("drake").addFilter(quiet)
+    try:
+        return _dispatch(argv)
+    finally:
+        logging.getLogger("drake").removeFilter(quiet)
+        if quiet.count:
+            print(f"({quiet.count} differential-IK warnings about unreachable hand poses hidden; "
+                  "--verbose shows them)", file=sys.stderr)
+
+
+def _dispatch(argv) -> int:
     if not argv or argv[0] in ("-h", "--help"):
         print(_usage())
         return 0
