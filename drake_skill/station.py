@@ -271,14 +271,19 @@ class Station(Diagram):
         return self.plant.EvalBodyPoseInWorld(plant_context, self.object_base)
 
     def set_object_joint(self, context, value: float) -> None:
+        """Sets the lid angle [rad] or drawer travel [m] in ``context``."""
         plant_context = self.plant.GetMyMutableContextFromRoot(context)
-        self.plant.SetPositions(plant_context, self.object_instance, np.r_[
-            self.plant.GetPositions(plant_context, self.object_instance)[:-1], value])
+        if self.config.object.kind == "box":
+            self.object_joint.set_angle(plant_context, value)
+        else:
+            self.object_joint.set_translation(plant_context, value)
 
     def reset(self, context, seed: int | None = None) -> RigidTransform:
-        """Returns ``context`` (this station's, or a root context containing it) to
-        its defaults, places the object at the pose drawn from ``seed`` (the
-        nominal pose when ``seed`` is None) and locks it. Returns X_WO.
+        """Prepares a context that was just set to its defaults (``SetDefaultContext``)
+        for a run: places the object at the pose drawn from ``seed`` (the nominal
+        pose when ``seed`` is None), locks it, and starts the hand controller at
+        the home joint positions. ``context`` is this station's or a root context
+        containing it. Returns X_WO.
         """
         X_WO = self.nominal_object_pose() if seed is None else self.random_object_pose(seed)
         self.set_object_pose(context, X_WO)

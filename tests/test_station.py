@@ -164,3 +164,11 @@ def test_config_yaml_round_trip(tmp_path):
     assert config.camera.width == StationConfig().camera.width
     with pytest.raises(FileNotFoundError, match="nope.yaml"):
         load_station_config(tmp_path / "nope.yaml")
+
+
+def test_object_joint_can_be_set():
+    sim = StationSimulation(_no_camera("open"))
+    sim.station.set_object_joint(sim.context, 0.7)
+    assert sim.object_state() == pytest.approx(0.7)
+    sim.reset(0)
+    assert sim.object_state() == pytest.approx(0.0)
