@@ -95,9 +95,8 @@ class RolloutRunner:
         builder.Connect(gripper.get_output_port(), self.station.GetInputPort("gripper_command"))
         self.segmenter = None
         if object_pose == "perceived":
-            from drake_skill.object_segmenter import ObjectSegmenter
-            self.segmenter = builder.AddNamedSystem("segmenter", ObjectSegmenter())
-            builder.Connect(self.station.GetOutputPort("point_cloud"), self.segmenter.get_input_port(0))
+            from drake_skill.object_segmenter import add_object_segmenter
+            self.segmenter = add_object_segmenter(builder, self.station)
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         self.simulator = Simulator(self.diagram, self.context)

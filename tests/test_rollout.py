@@ -67,3 +67,15 @@ def test_runner_rejects_bad_weights(draw_setup):
     bad[0, 0] = np.nan
     with pytest.raises(ValueError, match="NaN"):
         runner.run(bad, seed=0)
+
+
+def test_perceived_object_pose_is_close_to_the_truth(draw_setup):
+    dmp, runner, _ = draw_setup
+    config = scenario_for_skill("draw")
+    perceiving = RolloutRunner(config, dmp, DmpConfig(n_basis=30), skill="draw", object_pose="perceived")
+    X_WO = perceiving.reset(dmp.weights, seed=5)
+    X_true = perceiving.station.object_pose(perceiving.context)
+    assert np.linalg.norm(X_WO.translation() - X_true.translation()) < 0.01
+    with pytest.raises(ValueError, match="enable_camera"):
+        config.enable_camera = False
+        RolloutRunner(config, dmp, DmpConfig(n_basis=30), skill="draw", object_pose="perceived")
