@@ -29,7 +29,7 @@ from pydrake.systems.primitives import ConstantVectorSource
 
 from drake_skill.dmp import Dmp, DmpConfig
 from drake_skill.dmp_system import DmpSystem
-from drake_skill.simulation import DivergedError, pose_to_vector
+from drake_skill.simulation import DivergedError, pose_to_vector, record_station
 from drake_skill.station import Station, build_station
 from drake_skill.station_config import StationConfig
 from drake_skill.success import judge_success
@@ -140,21 +140,12 @@ class RolloutRunner:
     def run(self, weights, seed: int) -> RolloutResult:
         """One rollout of ``weights`` from the object pose drawn from ``seed``."""
         self.reset(weights, seed)
-        station_context = self.station.GetMyContextFromRoot(self.context)
-        ee_port, obj_port = self.station.GetOutputPort("ee_pose"), self.station.GetOutputPort("object_state")
-        state_port = self.station.GetOutputPort("panda_state")
         n = int(np.ceil(self.duration() * self.record_hz))
-        times, poses, objs = [], [], []
-        for k in range(n + 1):
-            t = k / self.record_hz
-            if k > 0:
-                self.simulator.AdvanceTo(t)
-            state = state_port.Eval(station_context)
-            if not np.all(np.isfinite(state)):
-                raise DivergedError(f"rollout seed {seed} diverged at t = {t:.2f} s")
-            times.append(t)
-            poses.append(pose_to_vector(ee_port.Eval(station_context)))
-            objs.append(float(obj_port.Eval(station_context)[0]))
-        final = objs[-1]
+        try:
+            times, poses, _, objs = record_station(self.simulator, self.station, self.context, 0.0, n,
+                                                   self.record_hz)
+        except DivergedError as e:
+            raise DivergedError(f"rollout seed {seed}: {e}") from e
+        final = float(objs[-1])
         return RolloutResult(seed, judge_success(self.skill, final, self.config.success), final,
-                             np.array(times), np.array(poses), np.array(objs), self._X_WO, self._X_WO_true)
+                             times, poses, objs, self._X_WO, self._X_WO_true)

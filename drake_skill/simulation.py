@@ -56,6 +56,31 @@ class DivergedError(RuntimeError):
     """The simulation produced non-finite or runaway states."""
 
 
+def record_station(simulator, station, root_context, t0: float, n: int, record_hz: float):
+    """Advances ``simulator`` from t0 over n periods of 1 / record_hz, sampling the
+    station at each of the n + 1 instants. Returns (times (T,), ee_pose (T, 7),
+    q (T, 7), object_state (T,)); raises DivergedError on non-finite joint
+    states or joint speeds above 50 rad/s.
+    """
+    context = station.GetMyContextFromRoot(root_context)
+    ee, state_port, obj = (station.GetOutputPort(name) for name in ("ee_pose", "panda_state", "object_state"))
+    times, poses, qs, objs = [], [], [], []
+    for k in range(n + 1):
+        t = t0 + k / record_hz
+        if k > 0:
+            simulator.AdvanceTo(t)
+        state = state_port.Eval(context)
+        if not np.all(np.isfinite(state)) or np.max(np.abs(state[7:])) > 50.0:
+            raise DivergedError(
+                f"simulation diverged at t = {t:.3f} s (joint state {np.round(state, 3)}); "
+                "check the commanded poses and the plant time_step")
+        times.append(t)
+        poses.append(pose_to_vector(ee.Eval(context)))
+        qs.append(state[:7].copy())
+        objs.append(float(obj.Eval(context)[0]))
+    return np.array(times), np.array(poses), np.array(qs), np.array(objs)
+
+
 class StationSimulation:
     """One station diagram, one simulator, reused for every run."""
 
@@ -117,26 +142,10 @@ class StationSimulation:
             self.set_plan(plan)
         if duration <= 0:
             raise ValueError(f"duration must be positive, got {duration}")
-        t0 = self.context.get_time()
-        n = int(round(duration * record_hz))
-        times, poses, qs, objs = [], [], [], []
-        sc = self.station_context()
-        ports = (self.station.GetOutputPort("ee_pose"), self.station.GetOutputPort("panda_state"),
-                 self.station.GetOutputPort("object_state"))
-        for k in range(n + 1):
-            t = t0 + k / record_hz
-            if k > 0:
-                self.simulator.AdvanceTo(t)
-            state = ports[1].Eval(sc)
-            if not np.all(np.isfinite(state)) or np.max(np.abs(state[7:])) > 50.0:
-                raise DivergedError(
-                    f"simulation diverged at t = {t:.3f} s (joint state {np.round(state, 3)}); "
-                    "check the commanded poses and the plant time_step")
-            times.append(t)
-            poses.append(pose_to_vector(ports[0].Eval(sc)))
-            qs.append(state[:7].copy())
-            objs.append(float(ports[2].Eval(sc)[0]))
-        return RunLog(np.array(times), np.array(poses), np.array(qs), np.array(objs), self._X_WO)
+        times, poses, qs, objs = record_station(self.simulator, self.station, self.context,
+                                                self.context.get_time(), int(round(duration * record_hz)),
+                                                record_hz)
+        return RunLog(times, poses, qs, objs, self._X_WO)
 
     def judge(self, skill: str, object_state: float | None = None) -> bool:
         """Ground-truth success of ``skill`` for the current (or given) object state."""

@@ -102,6 +102,20 @@ def hold_invalid(codes: np.ndarray, valid: np.ndarray, name: str = "frames") -> 
     return out
 
 
+def encode_sequence(encoder, object_points, valid=None, name: str = "object_points") -> np.ndarray:
+    """PCAE codes (T, 128) of (T, N, 3) clouds; frames not valid hold the last valid code."""
+    points = np.asarray(object_points, dtype=np.float32)
+    if points.ndim != 3 or points.shape[2] != 3:
+        raise ValueError(f"{name}: expected shape (T, N, 3), got {points.shape}")
+    valid = np.ones(len(points), bool) if valid is None else np.asarray(valid, bool)
+    if valid.shape != (len(points),):
+        raise ValueError(f"{name}: validity flags of shape {valid.shape} do not match {len(points)} frames")
+    codes = np.zeros((len(points), encoder.code_size), np.float32)
+    if valid.any():
+        codes[valid] = encoder.encode_points(points[valid])
+    return hold_invalid(codes, valid, name)
+
+
 @dc.dataclass
 class Skill:
     """A fitted skill (see the module docstring).
@@ -143,16 +157,7 @@ class Skill:
 
     def codes(self, object_points, valid=None, name: str = "object_points") -> np.ndarray:
         """PCAE codes (T, 128) of (T, 2048, 3) clouds; invalid frames hold the last valid code."""
-        points = np.asarray(object_points, dtype=np.float32)
-        if points.ndim != 3 or points.shape[2] != 3:
-            raise ValueError(f"{name}: expected shape (T, N, 3), got {points.shape}")
-        valid = np.ones(len(points), bool) if valid is None else np.asarray(valid, bool)
-        if valid.shape != (len(points),):
-            raise ValueError(f"{name}: validity flags of shape {valid.shape} do not match {len(points)} frames")
-        codes = np.zeros((len(points), self.goal_features.n_features), np.float32)
-        if valid.any():
-            codes[valid] = self.encoder().encode_points(points[valid])
-        return hold_invalid(codes, valid, name)
+        return encode_sequence(self.encoder(), object_points, valid, name)
 
     def goal_data(self, object_points, valid=None) -> np.ndarray:
         """Goal data G (T, 8) of an execution's object clouds (T, 2048, 3)."""
@@ -268,14 +273,8 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
     weights = _pcae_path(config)
     encoder = load_pcae(weights)
     pca = GoalFeatures.from_config(config.goal_features)
-    codes = []
-    for i, demo in enumerate(demos):
-        points = np.asarray(demo.object_points, dtype=np.float32)
-        valid = np.asarray(demo.perception_valid, dtype=bool)
-        c = np.zeros((len(points), pca.n_features), np.float32)
-        if valid.any():
-            c[valid] = encoder.encode_points(points[valid])
-        codes.append(hold_invalid(c, valid, f"demos[{i}].perception_valid"))
+    codes = [encode_sequence(encoder, d.object_points, d.perception_valid, f"demos[{i}].perception_valid")
+             for i, d in enumerate(demos)]
     lengths = np.array([len(c) for c in codes])
     pca.fit(np.concatenate(codes), lengths)
     goal = [pca.transform(c) for c in codes]
