@@ -68,3 +68,15 @@ def load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
             return {k: data[k] for k in data.files}
     except Exception as e:  # zipfile.BadZipFile, ValueError, OSError, ...
         raise ValueError(f"{path}: not a readable numpy .npz archive ({e})") from e
+
+
+def write_figure_png(fig, path: str | os.PathLike, **savefig_kwargs) -> Path:
+    """Renders a matplotlib figure to PNG and writes it to ``path`` atomically.
+
+    ``savefig_kwargs`` go to ``Figure.savefig`` (``dpi``, ``bbox_inches``).
+    """
+    import io
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", **savefig_kwargs)
+    return atomic_write_bytes(path, buf.getvalue())

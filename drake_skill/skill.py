@@ -1,18 +1,18 @@
 """A learned skill: action model + goal model, fitted from 2-3 demonstrations.
 
-``fit_skill(demos, config)`` (METHOD.md sections 2-4, thesis chapters 4-6):
+``fit_skill(demos, config)`` (docs/method.md sections 2-4, thesis chapters 4-6):
 
 1. action model: one DMP per demonstration fitted to the 10 Hz hand poses in
    the object frame; the initial policy weights are one of them (drawn by
    seed) and the per-basis exploration covariances Sigma_b^0 their sample
-   covariance plus a ridge (``drake_skill.dmp.fit_demonstrations``);
+   covariance plus a ridge (``drake_skill.action.dmp.fit_demonstrations``);
 2. perception: every demonstration frame's segmented object cloud (2048
    points) is encoded by the PCAE into a 128-D code (frames where the object
    was not seen hold the last seen code, as ``PcaeFeaturizer`` does online);
    a PCA fitted on all demonstration codes maps them to 8-D goal data;
 3. goal model: a Gaussian HMM over the goal data (states chosen by AIC),
    terminal states, MRP state values, and the POMRP reward / verdict
-   (``drake_skill.pomrp.fit_pomrp``).
+   (``drake_skill.reward.pomrp.fit_pomrp``).
 
 A :class:`Skill` saves to a directory and loads back identical, without
 pickle::
@@ -33,11 +33,11 @@ from typing import Any, Sequence
 import numpy as np
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
-from drake_skill.dmp import Dmp, DmpConfig, fit_demonstrations
+from drake_skill.action.dmp import Dmp, DmpConfig, fit_demonstrations
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, atomic_write_text, load_npz
-from drake_skill.goal_features import GoalFeatures, GoalFeaturesConfig
-from drake_skill.pomrp import Pomrp, PomrpConfig, fit_pomrp
-from drake_skill.station_config import SKILLS
+from drake_skill.perception.features import GoalFeatures, GoalFeaturesConfig
+from drake_skill.reward.pomrp import Pomrp, PomrpConfig, fit_pomrp
+from drake_skill.station.config import SKILLS
 
 SCHEMA_VERSION = 1
 
@@ -51,7 +51,7 @@ class SkillConfig:
 
     skill: "open", "close" or "draw".
     dmp: DMP hyper-parameters (n_basis defaults per skill, thesis Table 6.1).
-    dmp_ridge: relative ridge of Sigma_b^0 (``drake_skill.dmp.exploration_covariance``).
+    dmp_ridge: relative ridge of Sigma_b^0 (``drake_skill.action.dmp.exploration_covariance``).
     seed: picks the demonstration whose DMP starts policy search.
     goal_features: PCA size (8).
     pomrp: goal HMM, MRP and verdict settings.
@@ -75,7 +75,7 @@ def default_skill_config(skill: str) -> SkillConfig:
 
 
 def _pcae_path(config: SkillConfig) -> Path:
-    from drake_skill.pcae import DEFAULT_WEIGHTS
+    from drake_skill.perception.pcae import DEFAULT_WEIGHTS
     return Path(config.pcae_weights) if config.pcae_weights else Path(DEFAULT_WEIGHTS)
 
 
@@ -150,7 +150,7 @@ class Skill:
 
     # ------------------------------------------------------------ perception
     def encoder(self):
-        from drake_skill.pcae import load_pcae
+        from drake_skill.perception.pcae import load_pcae
         if getattr(self, "_encoder", None) is None:
             self._encoder = load_pcae(self.pcae_weights)
         return self._encoder
@@ -253,7 +253,7 @@ class Skill:
 
 def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
     """Fits a skill from demonstrations (objects with ``times``, ``X_OE``,
-    ``object_points``, ``perception_valid``, e.g. ``drake_skill.demonstrations.Demonstration``).
+    ``object_points``, ``perception_valid``, e.g. ``drake_skill.demos.format.Demonstration``).
     """
     config = config if config is not None else default_skill_config("open")
     if len(demos) < 2:
@@ -269,7 +269,7 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
     fit = fit_demonstrations([(d.times, d.X_OE) for d in demos], config.dmp,
                              seed=config.seed, ridge=config.dmp_ridge)
 
-    from drake_skill.pcae import load_pcae
+    from drake_skill.perception.pcae import load_pcae
     weights = _pcae_path(config)
     encoder = load_pcae(weights)
     pca = GoalFeatures.from_config(config.goal_features)

@@ -2,7 +2,7 @@
 
 import json
 
-from drake_skill.cli import main
+from drake_skill.cli.main import main
 
 
 def test_help_lists_commands(capsys):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from drake_skill.demonstrations import (
+from drake_skill.demos.format import (
     SCHEMA_VERSION,
     Demonstration,
     DemonstrationError,

@@ -8,8 +8,8 @@ import pytest
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from drake_skill.demonstrations import load_demonstration, save_demonstration
-from drake_skill.demonstrator import (
+from drake_skill.demos.format import load_demonstration, save_demonstration
+from drake_skill.demos.demonstrator import (
     DemonstratorConfig,
     ScriptedDemonstrator,
     StationRecorder,
@@ -18,11 +18,11 @@ from drake_skill.demonstrator import (
     make_perception,
     pose_to_vector,
 )
-from drake_skill.object_segmenter import ObjectSegmenter, segmenter_config_for_station
-from drake_skill.pose_source import hold_plan
-from drake_skill.scripted import keyframes, scripted_plan
-from drake_skill.simulation import StationSimulation
-from drake_skill.station_config import scenario_for_skill
+from drake_skill.perception.systems import ObjectSegmenter, segmenter_config_for_station
+from drake_skill.station.pose_source import hold_plan
+from drake_skill.station.scripted import keyframes, scripted_plan
+from drake_skill.station.simulation import StationSimulation
+from drake_skill.station.config import scenario_for_skill
 
 logging.getLogger("drake").setLevel(logging.ERROR)   # diff-IK "stuck" chatter
 
@@ -182,7 +182,7 @@ def test_perception_is_recorded_at_10_hz_on_the_action_instants():
 
 
 def test_cli_records_files_table_and_plot_and_never_overwrites(tmp_path, capsys):
-    from drake_skill.demos_cli import main
+    from drake_skill.cli.demos import main
 
     out = tmp_path / "draw"
     assert main(["record", "--skill", "draw", "--count", "1", "--seed", "1", "--no-camera", "--quiet",

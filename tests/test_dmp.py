@@ -1,4 +1,4 @@
-"""Tests of the numpy DMP (drake_skill.dmp): fitting, integration, exploration covariance, input checks."""
+"""Tests of the numpy DMP (drake_skill.action.dmp): fitting, integration, exploration covariance, input checks."""
 
 import json
 import math
@@ -9,7 +9,7 @@ import scipy.linalg
 from scipy.integrate import solve_ivp
 
 from drake_skill.bench.dmp import synthetic_demonstration
-from drake_skill.dmp import (
+from drake_skill.action.dmp import (
     Dmp,
     DmpConfig,
     _discrete_filter,
@@ -24,7 +24,7 @@ from drake_skill.dmp import (
     integrate,
     phase,
 )
-from drake_skill.quaternion import quaternion_distance, rotation_angle
+from drake_skill.action.quaternion import quaternion_distance, rotation_angle
 
 Y0 = np.array([0.0, 0.1, 0.2, 1.0, 0.0, 0.0, 0.0])
 GOAL = np.array([0.3, -0.1, 0.25, 0.8, 0.6, 0.0, 0.0])

@@ -6,11 +6,11 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-import drake_skill.dmp_system as dmp_system_module
+import drake_skill.action.systems as dmp_system_module
 from drake_skill.bench.dmp import synthetic_demonstration
-from drake_skill.dmp import DmpConfig, fit_dmp, integrate, phase
-from drake_skill.dmp_system import DmpSystem
-from drake_skill.quaternion import quaternion_distance
+from drake_skill.action.dmp import DmpConfig, fit_dmp, integrate, phase
+from drake_skill.action.systems import DmpSystem
+from drake_skill.action.quaternion import quaternion_distance
 
 CFG = DmpConfig(n_basis=10)
 X_WO_1 = RigidTransform(RollPitchYaw(0.1, -0.2, 0.3), [0.5, 0.1, 0.7])

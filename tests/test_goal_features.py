@@ -1,10 +1,10 @@
-"""Tests for drake_skill.goal_features (per-skill PCA of PCAE codes, METHOD.md 3)."""
+"""Tests for drake_skill.perception.features (per-skill PCA of PCAE codes, docs/method.md 3)."""
 
 import numpy as np
 import pytest
 
 from drake_skill.fileio import atomic_save_npz, load_npz
-from drake_skill.goal_features import GoalFeatures, GoalFeaturesConfig
+from drake_skill.perception.features import GoalFeatures, GoalFeaturesConfig
 
 
 def _codes(seed=0, t=60, d=128, rank=5):

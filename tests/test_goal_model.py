@@ -9,7 +9,7 @@ from pydrake.common.yaml import yaml_load_typed
 
 from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, load_npz
-from drake_skill.goal_model import (
+from drake_skill.reward.goal_model import (
     GoalHMM,
     GoalModelConfig,
     forward_backward,

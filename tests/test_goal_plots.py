@@ -5,15 +5,15 @@ import matplotlib.image as mimage
 import numpy as np
 import pytest
 
-from drake_skill.goal_model import GoalHMM
-from drake_skill.goal_plots import (
+from drake_skill.reward.goal_model import GoalHMM
+from drake_skill.reward.plots import (
     INITIAL_COLOR,
     TERMINAL_COLOR,
     goal_graph_layout,
     plot_goal_model,
     plot_return,
 )
-from drake_skill.pomrp import Pomrp
+from drake_skill.reward.pomrp import Pomrp
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from pydrake.common.yaml import yaml_load_typed
 
-from drake_skill.mrp import (
+from drake_skill.reward.mrp import (
     MrpConfig,
     discounted_returns,
     exact_values,

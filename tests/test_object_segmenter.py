@@ -10,16 +10,16 @@ from pydrake.perception import BaseField, Fields, PointCloud
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_skill.object_segmenter import (
+from drake_skill.perception.systems import (
     ObjectSegmenter,
     ObjectSegmenterConfig,
     add_object_segmenter,
     segmenter_config_for_station,
 )
-from drake_skill.pose_source import PosePlan, PoseTrajectorySource, hold_plan
-from drake_skill.segmentation import fit_table_plane
-from drake_skill.station import build_station
-from drake_skill.station_config import StationConfig, scenario_for_skill
+from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
+from drake_skill.perception.segmentation import fit_table_plane
+from drake_skill.station.builder import build_station
+from drake_skill.station.config import StationConfig, scenario_for_skill
 
 
 class Rig:

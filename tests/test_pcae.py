@@ -1,4 +1,4 @@
-"""Tests for drake_skill.pcae (point-cloud autoencoder, METHOD.md 3, thesis 3.5)."""
+"""Tests for drake_skill.perception.pcae (point-cloud autoencoder, docs/method.md 3, thesis 3.5)."""
 
 import json
 from pathlib import Path
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from drake_skill import pcae, shapes
+from drake_skill.perception import pcae, shapes
 
 torch.set_num_threads(1)
 

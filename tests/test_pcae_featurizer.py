@@ -1,4 +1,4 @@
-"""Tests for drake_skill.pcae_featurizer (the PcaeFeaturizer LeafSystem)."""
+"""Tests for drake_skill.perception.systems (the PcaeFeaturizer LeafSystem)."""
 
 import numpy as np
 import pytest
@@ -8,9 +8,9 @@ from pydrake.common.yaml import yaml_load_typed
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 
-from drake_skill import pcae
-from drake_skill.goal_features import GoalFeatures
-from drake_skill.pcae_featurizer import PcaeFeaturizer, PcaeFeaturizerConfig
+from drake_skill.perception import pcae
+from drake_skill.perception.features import GoalFeatures
+from drake_skill.perception.systems import PcaeFeaturizer, PcaeFeaturizerConfig
 
 torch.set_num_threads(1)
 

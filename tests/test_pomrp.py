@@ -10,8 +10,8 @@ from pydrake.common.yaml import yaml_load_typed
 from drake_skill.bench import reward as bench_reward
 from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, load_npz
-from drake_skill.mrp import exact_values
-from drake_skill.pomrp import Pomrp, PomrpConfig, VerdictConfig, fit_pomrp
+from drake_skill.reward.mrp import exact_values
+from drake_skill.reward.pomrp import Pomrp, PomrpConfig, VerdictConfig, fit_pomrp
 
 TRUE = left_to_right_model(n_states=4, seed=0)
 

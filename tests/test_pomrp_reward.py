@@ -8,8 +8,8 @@ from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
-from drake_skill.pomrp import fit_pomrp
-from drake_skill.pomrp_reward import PomrpReward, PomrpRewardConfig
+from drake_skill.reward.pomrp import fit_pomrp
+from drake_skill.reward.systems import PomrpReward, PomrpRewardConfig
 
 TRUE = left_to_right_model(n_states=4, seed=0)
 PERIOD = 0.1

@@ -1,10 +1,10 @@
-"""Tests of drake_skill.quaternion against scipy's Rotation (scalar-last) as reference."""
+"""Tests of drake_skill.action.quaternion against scipy's Rotation (scalar-last) as reference."""
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from drake_skill.quaternion import (
+from drake_skill.action.quaternion import (
     as_quaternions,
     make_quaternions_continuous,
     quat_conjugate,

@@ -5,13 +5,13 @@ import pytest
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform
 
-from drake_skill.dmp import DmpConfig, fit_dmp
-from drake_skill.quaternion import make_quaternions_continuous
-from drake_skill.resample import resample_demonstration
-from drake_skill.rollout import RolloutRunner
-from drake_skill.scripted import scripted_plan
-from drake_skill.simulation import StationSimulation, pose_to_vector
-from drake_skill.station_config import scenario_for_skill
+from drake_skill.action.dmp import DmpConfig, fit_dmp
+from drake_skill.action.quaternion import make_quaternions_continuous
+from drake_skill.demos.format import downsample_action
+from drake_skill.learning.rollout import RolloutRunner
+from drake_skill.station.scripted import scripted_plan
+from drake_skill.station.simulation import StationSimulation, pose_to_vector
+from drake_skill.station.config import scenario_for_skill
 
 
 @pytest.fixture(scope="module")
@@ -27,7 +27,7 @@ def draw_setup():
     poses = np.array([pose_to_vector(X_OW @ RigidTransform(Quaternion(p[3:] / np.linalg.norm(p[3:])), p[:3]))
                       for p in log.ee_pose])
     poses[:, 3:] = make_quaternions_continuous(poses[:, 3:])
-    times, poses = resample_demonstration(log.times, poses, rate_hz=10)
+    _, times, poses = downsample_action(log.times, poses, rate_hz=10)
     dmp_config = DmpConfig(n_basis=30)   # enough bases to thread the finger behind the handle
     dmp = fit_dmp(times, poses, dmp_config)
     runner = RolloutRunner(config, dmp, dmp_config, skill="draw", record_hz=10)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pydrake.common.yaml import yaml_load_typed
 
-from drake_skill.segmentation import (
+from drake_skill.perception.segmentation import (
     SegmentationConfig,
     check_organised_cloud,
     cluster_organised,
@@ -31,8 +31,8 @@ SEEDS = (0, 1, 2)
 @pytest.fixture(scope="module")
 def station_frames():
     """Per skill, per seed: (xyz (P, 3), rgb (P, 3), object pixel mask (H, W), X_WO 4x4)."""
-    from drake_skill.simulation import StationSimulation
-    from drake_skill.station_config import scenario_for_skill
+    from drake_skill.station.simulation import StationSimulation
+    from drake_skill.station.config import scenario_for_skill
 
     frames = {}
     for skill, bodies in OBJECT_BODIES.items():

@@ -1,11 +1,11 @@
-"""Tests for drake_skill.shapes (procedural shapes and simulated depth views)."""
+"""Tests for drake_skill.perception.shapes (procedural shapes and simulated depth views)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from drake_skill import pcae, shapes
+from drake_skill.perception import pcae, shapes
 
 
 def test_generate_clouds_is_seeded_and_sliceable():

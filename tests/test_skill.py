@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from drake_skill.demonstrator import DemonstratorConfig, ScriptedDemonstrator, StationRecorder, make_perception
-from drake_skill.pose_source import hold_plan
+from drake_skill.demos.demonstrator import DemonstratorConfig, ScriptedDemonstrator, StationRecorder, make_perception
+from drake_skill.station.pose_source import hold_plan
 from drake_skill.skill import Skill, default_skill_config, fit_skill, hold_invalid
 
 
@@ -110,10 +110,10 @@ def _run_pipeline(skill, plan_for, seed, duration):
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
 
-    from drake_skill.goal_pipeline import add_goal_pipeline
-    from drake_skill.pose_source import PoseTrajectorySource
-    from drake_skill.station import build_station
-    from drake_skill.station_config import scenario_for_skill
+    from drake_skill.reward.systems import add_goal_pipeline
+    from drake_skill.station.pose_source import PoseTrajectorySource
+    from drake_skill.station.builder import build_station
+    from drake_skill.station.config import scenario_for_skill
 
     builder = DiagramBuilder()
     station = builder.AddNamedSystem("station", build_station(scenario_for_skill("close")))
@@ -136,7 +136,7 @@ def _run_pipeline(skill, plan_for, seed, duration):
 def test_goal_pipeline_in_the_diagram_rewards_closing_over_parking(close_skill):
     """The ARCHITECTURE chain, simulated: a scripted Close earns a success verdict and a
     higher return per frame than the parked arm, from the camera alone."""
-    from drake_skill.scripted import scripted_plan
+    from drake_skill.station.scripted import scripted_plan
 
     ok, R, G = _run_pipeline(close_skill, lambda X_WO, home: scripted_plan("close", X_WO, home), 21, 11.0)
     parked_ok, parked_R, parked_G = _run_pipeline(close_skill, lambda X_WO, home: hold_plan(home), 21, 5.0)
@@ -148,8 +148,8 @@ def test_goal_pipeline_in_the_diagram_rewards_closing_over_parking(close_skill):
 
 
 def test_fit_cli_writes_skill_and_pictures(close_data, tmp_path, capsys):
-    from drake_skill.cli import main
-    from drake_skill.demonstrations import save_demonstration
+    from drake_skill.cli.main import main
+    from drake_skill.demos.format import save_demonstration
 
     demos, _, _ = close_data
     for i, demo in enumerate(demos):

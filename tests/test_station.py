@@ -6,12 +6,12 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 
-from drake_skill.models import add_package_paths, model_url
-from drake_skill.pose_source import hold_plan
-from drake_skill.scripted import scripted_plan
-from drake_skill.simulation import StationSimulation
-from drake_skill.station_config import StationConfig, load_station_config, scenario_for_skill
-from drake_skill.success import judge_success
+from drake_skill.station.models import add_package_paths, model_url
+from drake_skill.station.pose_source import hold_plan
+from drake_skill.station.scripted import scripted_plan
+from drake_skill.station.simulation import StationSimulation
+from drake_skill.station.config import StationConfig, load_station_config, scenario_for_skill
+from drake_skill.station.success import judge_success
 
 
 def _no_camera(skill):
@@ -37,7 +37,7 @@ def test_models_parse_without_warnings(filename, caplog):
 
 def test_panda_kinematics_match_published_values():
     """At q = 0 Franka's flange is at (0.088, 0, 0.926) m."""
-    from drake_skill.ee_controller import make_control_plant
+    from drake_skill.station.controller import make_control_plant
     plant = make_control_plant()
     context = plant.CreateDefaultContext()
     X = plant.CalcRelativeTransform(context, plant.world_frame(), plant.GetFrameByName("panda_link8"))

@@ -10,7 +10,7 @@ import pytest
 from pydrake.geometry import Meshcat
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from drake_skill.teleop import (
+from drake_skill.demos.teleop import (
     DONE,
     IDLE,
     RECORD_BUTTON,

@@ -34,9 +34,9 @@ def main(argv=None) -> int:
     from tqdm import tqdm
 
     from drake_skill.fileio import atomic_write_json
-    from drake_skill.rollout import RolloutRunner
+    from drake_skill.learning.rollout import RolloutRunner
     from drake_skill.skill import Skill
-    from drake_skill.station_config import scenario_for_skill
+    from drake_skill.station.config import scenario_for_skill
 
     skill = Skill.load(args.skill_dir)
     config = scenario_for_skill(skill.name)

@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Trains the point-cloud autoencoder (PCAE) on generated partial views and ships it.
 
-METHOD.md section 3; thesis 3.5 and 6.4. The thesis trained on ShapeNet for
+docs/method.md section 3; thesis 3.5 and 6.4. The thesis trained on ShapeNet for
 350 epochs; here the data are procedurally generated, skill-agnostic shapes
 seen by a simulated Kinect-like depth camera (drake_skill/shapes.py).
 
@@ -11,7 +11,7 @@ no cloud is seen twice and the encoder never overfits a fixed set. The
 held-out set uses a different seed (``--heldout-seed``).
 
 Optimisation (thesis 3.5): Chamfer loss on normalised clouds (the thesis'
-EMD is too slow on a CPU; Chamfer is the accepted stand-in, METHOD.md 3),
+EMD is too slow on a CPU; Chamfer is the accepted stand-in, docs/method.md 3),
 Adam with lr 5e-4, batch 16.
 
 Weight decay: the thesis lists L2 regularisation with lambda = 1e-3, the value
@@ -55,8 +55,8 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from drake_skill import pcae  # noqa: E402
-from drake_skill import shapes  # noqa: E402
+from drake_skill.perception import pcae  # noqa: E402
+from drake_skill.perception import shapes  # noqa: E402
 from drake_skill.fileio import atomic_write_bytes, atomic_write_json  # noqa: E402
 
 
@@ -232,7 +232,7 @@ def main(argv=None) -> int:
             "formula": "x_norm = (p - 0.5 (min p + max p)) / scale_m; fixed scale, no per-cloud scaling, so object size and state (lid, drawer) stay in the input",
         },
         "data": {
-            "generator": "drake_skill.shapes.generate_clouds (open3d RaycastingScene)",
+            "generator": "drake_skill.perception.shapes.generate_clouds (open3d RaycastingScene)",
             "shape_kinds": dict(zip(shapes.SHAPE_KINDS, shapes.SHAPE_WEIGHTS)),
             "camera": dataclasses.asdict(cfg.camera),
             "view": dataclasses.asdict(cfg.view),

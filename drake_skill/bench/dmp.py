@@ -34,8 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_skill.dmp import DmpConfig, clear_operator_cache, fit_dmp, integrate
-from drake_skill.quaternion import quat_exp, quat_multiply, rotation_angle
+from drake_skill.action.dmp import DmpConfig, clear_operator_cache, fit_dmp, integrate
+from drake_skill.action.quaternion import quat_exp, quat_multiply, rotation_angle
 
 DEFAULT_MP_VENV = Path.home() / ".cache" / "drake-skill" / "bench-venv"
 

@@ -8,7 +8,7 @@ One process, one thread: ``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS`` and
 can still be changed), and torch runs with one thread.
 
 - ``segment_ms``: median wall time of
-  :func:`drake_skill.segmentation.process_frame` (colour, crop, table
+  :func:`drake_skill.perception.segmentation.process_frame` (colour, crop, table
   removal, organised clustering, bounding box and X_WO, resampling to 2048
   points) on the station's 640 x 480 coloured clouds. ``--frames`` clouds
   (default 20) are recorded once from the simulated station (skill
@@ -17,7 +17,7 @@ can still be changed), and torch runs with one thread.
   times. The table plane is fitted once (``plane_fit_ms``), as the
   ``ObjectSegmenter`` does. Also reported: ``segment_p90_ms``,
   ``segment_max_ms``, ``valid_frames``.
-- ``encode_ms``: :func:`drake_skill.pcae.time_encode` (ms per 2048-point
+- ``encode_ms``: :func:`drake_skill.perception.pcae.time_encode` (ms per 2048-point
   cloud, median of 50); ``null`` with ``encode_note`` when it is unavailable.
 
 The requirement (``segment_limit_ms`` 20, ``encode_limit_ms`` 10) is checked
@@ -45,9 +45,9 @@ def record_clouds(n_frames: int = 20, skill: str = "open", seed: int = 0, spacin
     """``n_frames`` clouds ``(xyz (P, 3) float32, rgb (P, 3) uint8)`` from the simulated
     station during the scripted ``skill``, one every ``spacing_s`` s from t = 0;
     also returns ``(image_shape, station_config)``."""
-    from drake_skill.scripted import scripted_plan
-    from drake_skill.simulation import StationSimulation
-    from drake_skill.station_config import scenario_for_skill
+    from drake_skill.station.scripted import scripted_plan
+    from drake_skill.station.simulation import StationSimulation
+    from drake_skill.station.config import scenario_for_skill
 
     config = scenario_for_skill(skill)
     sim = StationSimulation(config)
@@ -65,8 +65,8 @@ def record_clouds(n_frames: int = 20, skill: str = "open", seed: int = 0, spacin
 
 def time_segmentation(clouds, image_shape, station_config, repeats: int = 3) -> dict:
     """Times :func:`process_frame` on recorded clouds; returns the ``segment_*`` figures."""
-    from drake_skill.object_segmenter import segmenter_config_for_station
-    from drake_skill.segmentation import fit_table_plane, process_frame
+    from drake_skill.perception.systems import segmenter_config_for_station
+    from drake_skill.perception.segmentation import fit_table_plane, process_frame
 
     config = segmenter_config_for_station(station_config)
     seg = config.segmentation
@@ -90,16 +90,16 @@ def time_segmentation(clouds, image_shape, station_config, repeats: int = 3) -> 
 
 
 def time_encoding(n_frames: int = 50) -> tuple[float | None, str | None]:
-    """``(ms per frame, None)`` from ``drake_skill.pcae.time_encode``, or ``(None, why)``."""
+    """``(ms per frame, None)`` from ``drake_skill.perception.pcae.time_encode``, or ``(None, why)``."""
     try:
         import torch
 
         torch.set_num_threads(1)
-        from drake_skill import pcae
+        from drake_skill.perception import pcae
     except Exception as e:  # noqa: BLE001 - any import failure is reported, not raised
-        return None, f"drake_skill.pcae not importable: {e}"
+        return None, f"drake_skill.perception.pcae not importable: {e}"
     if not hasattr(pcae, "time_encode"):
-        return None, "drake_skill.pcae has no time_encode()"
+        return None, "drake_skill.perception.pcae has no time_encode()"
     note = None if pcae.DEFAULT_WEIGHTS.is_file() else "shipped weights missing: timed random weights"
     return float(pcae.time_encode(n_frames=n_frames)), note
 

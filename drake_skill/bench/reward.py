@@ -27,8 +27,8 @@ import time
 
 import numpy as np
 
-from drake_skill.goal_model import GoalHMM
-from drake_skill.pomrp import Pomrp, fit_pomrp
+from drake_skill.reward.goal_model import GoalHMM
+from drake_skill.reward.pomrp import Pomrp, fit_pomrp
 
 
 def left_to_right_model(n_states: int = 4, n_features: int = 8, stay: float = 0.88, std: float = 0.08,

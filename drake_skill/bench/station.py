@@ -19,9 +19,9 @@ import numpy as np
 
 
 def _rtf(with_camera: bool, duration: float, seed: int) -> float:
-    from drake_skill.scripted import scripted_plan
-    from drake_skill.simulation import StationSimulation
-    from drake_skill.station_config import scenario_for_skill
+    from drake_skill.station.scripted import scripted_plan
+    from drake_skill.station.simulation import StationSimulation
+    from drake_skill.station.config import scenario_for_skill
 
     config = scenario_for_skill("open")
     config.enable_camera = with_camera

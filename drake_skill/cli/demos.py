@@ -1,0 +1,156 @@
+"""``drake-skill demos record``: record demonstrations of a skill into a folder.
+
+Scripted (default): the human-like scripted demonstrator plays the skill in
+the simulated station (``drake_skill.demos.demonstrator``); a variation that fails
+the ground-truth judge is replaced by the next seed. Interactive
+(``--interactive``): Meshcat opens, you drive the hand with sliders, keys or
+a gamepad and press Record / Stop (``drake_skill.demos.teleop``).
+
+Writes ``OUT/demo_000.npz``, ``demo_001.npz``, ... (format:
+``drake_skill.demos.format``) and ``OUT/demos.png`` (the demonstrated hand
+paths in the object frame and the object state over time), then prints a
+table. Existing demo files are never replaced without ``--force``.
+
+examples:
+  drake-skill demos record --skill open --out demos/open
+  drake-skill demos record --skill close --count 2 --seed 10 --out demos/close
+  drake-skill demos record --skill draw --interactive --out demos/draw_by_hand
+"""
+
+import argparse
+import dataclasses as dc
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from drake_skill.common import SKILLS
+from drake_skill.fileio import write_figure_png
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="drake-skill demos", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    rec = sub.add_parser("record", help="record demonstrations of a skill",
+                         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    rec.add_argument("--skill", required=True, choices=SKILLS, help="the skill to demonstrate")
+    rec.add_argument("--count", type=int, default=0,
+                     help="demonstrations to record (default: the thesis' 3 open, 2 close, 2 draw)")
+    rec.add_argument("--out", type=Path, required=True, help="folder for demo_NNN.npz and demos.png")
+    rec.add_argument("--seed", type=int, default=None,
+                     help="first seed: object pose and variation of the first demonstration "
+                          "(default: the config's, 0)")
+    rec.add_argument("--interactive", action="store_true",
+                     help="drive the hand yourself in Meshcat instead of the scripted demonstrator")
+    rec.add_argument("--no-camera", action="store_true",
+                     help="skip the camera (much faster; the files then have no perception fields)")
+    rec.add_argument("--config", type=Path,
+                     help="YAML file of DemonstratorConfig fields (variation, rates, attempts)")
+    rec.add_argument("--force", action="store_true", help="replace the demo files already in --out (extra old ones are removed)")
+    rec.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def _plot(demos, path: Path) -> Path:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(12, 4.2))
+    ax3 = fig.add_subplot(1, 3, 1, projection="3d")
+    ax_xz = fig.add_subplot(1, 3, 2)
+    ax_obj = fig.add_subplot(1, 3, 3)
+    for i, d in enumerate(demos):
+        p = d.X_OE_100hz[:, :3]
+        label = f"demo {i} (seed {d.seed})"
+        line, = ax3.plot(p[:, 0], p[:, 1], p[:, 2], lw=1.2, label=label)
+        ax3.scatter(*d.X_OE[:, :3].T, s=4, color=line.get_color())
+        ax_xz.plot(p[:, 0], p[:, 2], lw=1.2, color=line.get_color(), label=label)
+        ax_xz.plot(p[0, 0], p[0, 2], "o", color=line.get_color())
+        ax_obj.plot(d.times_100hz, d.object_state_100hz, color=line.get_color(), label=label)
+    skill = demos[0].skill
+    # Equal scale on the three axes (the y extent is often tiny).
+    pts = np.concatenate([d.X_OE_100hz[:, :3] for d in demos])
+    centre, half = (pts.max(0) + pts.min(0)) / 2, max(np.ptp(pts, axis=0).max() / 2, 0.01)
+    ax3.set_xlim(centre[0] - half, centre[0] + half)
+    ax3.set_ylim(centre[1] - half, centre[1] + half)
+    ax3.set_zlim(centre[2] - half, centre[2] + half)
+    ax3.set_title(f"{skill}: hand path in the object frame")
+    ax3.set_xlabel("x_O [m]")
+    ax3.set_ylabel("y_O [m]")
+    ax3.set_zlabel("z_O [m]")
+    ax_xz.set_title("side view (o = start; dots: 10 Hz samples in 3-D)")
+    ax_xz.set_xlabel("x_O [m]")
+    ax_xz.set_ylabel("z_O [m]")
+    ax_xz.set_aspect("equal", adjustable="datalim")
+    ax_xz.grid(alpha=0.3)
+    ax_obj.set_title("object state (ground truth)")
+    ax_obj.set_xlabel("time [s]")
+    ax_obj.set_ylabel("drawer travel [m]" if skill == "draw" else "lid angle [rad]")
+    ax_obj.grid(alpha=0.3)
+    ax_obj.legend(fontsize=8)
+    fig.tight_layout()
+    written = write_figure_png(fig, path, dpi=100)
+    plt.close(fig)
+    return written
+
+
+def table(rows) -> str:
+    """The summary table printed at the end; rows are (file, demo) pairs."""
+    lines = [f"{'file':<14}{'seed':>6}{'duration s':>12}{'samples 100/10 Hz':>19}{'perception':>12}"
+             f"{'success':>9}{'final state':>13}"]
+    for name, d in rows:
+        perception = f"{int(d.perception_valid.sum())}/{d.n_samples}" if d.has_perception else "-"
+        lines.append(f"{name:<14}{d.seed:>6}{d.duration:>12.2f}{d.times_100hz.size:>11} / {d.n_samples:<5}"
+                     f"{perception:>12}{'yes' if d.success else 'NO':>9}{d.final_object_state:>13.3f}")
+    return "\n".join(lines)
+
+
+def record(args) -> int:
+    from drake_skill.demos.format import demo_path, existing_demo_files, save_demonstration
+    from drake_skill.demos.demonstrator import DEFAULT_COUNTS, DemonstratorConfig, load_demonstrator_config
+
+    config = load_demonstrator_config(args.config) if args.config else DemonstratorConfig()
+    if args.count < 0:
+        print("drake-skill demos record: --count must be positive", file=sys.stderr)
+        return 2
+    count = args.count or config.count or DEFAULT_COUNTS[args.skill]
+    seed = config.seed if args.seed is None else args.seed
+    config = dc.replace(config, count=count, seed=seed, record_perception=not args.no_camera)
+    existing = existing_demo_files(args.out)
+    if existing and not args.force:
+        print(f"drake-skill demos record: {args.out} already holds {len(existing)} demonstration file(s) "
+              f"({', '.join(p.name for p in existing[:3])}{', ...' if len(existing) > 3 else ''}); "
+              "pass --force to replace them or choose another --out", file=sys.stderr)
+        return 1
+    if args.interactive:
+        from drake_skill.demos.teleop import TeleopConfig, record_interactive
+        demos = record_interactive(args.skill, count, seed=seed,
+                                   config=TeleopConfig(record_perception=not args.no_camera))
+    else:
+        from drake_skill.demos.demonstrator import ScriptedDemonstrator
+        demos = ScriptedDemonstrator(args.skill, config).record_many(progress=not args.quiet)
+    if args.force:
+        # Stale files beyond the new count would mix with the new demonstrations.
+        for p in existing[len(demos):]:
+            p.unlink()
+    rows = []
+    for i, demo in enumerate(demos):
+        path = save_demonstration(demo, demo_path(args.out, i), force=args.force)
+        rows.append((path.name, demo))
+    png = _plot(demos, args.out / "demos.png")
+    print(table(rows))
+    print(f"wrote {len(demos)} demonstration(s) to {args.out}/ and {png}")
+    return 0 if all(d.success for d in demos) else 1
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    if args.action == "record":
+        return record(args)
+    return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,78 @@
+"""``drake-skill fit``: demonstrations in, a learned skill (action + goal model) out.
+
+    drake-skill fit --demos DIR --out SKILL_DIR [--config skill.yaml] [--seed N] [--force]
+
+Loads every ``demo_*.npz`` of DIR (see ``drake-skill demos record``), fits the
+skill (``drake_skill.skill.fit_skill``: per-demonstration DMPs and Sigma_0,
+PCAE codes -> PCA goal data, goal HMM by AIC, MRP values, POMRP reward),
+prints the goal model's summary, and writes SKILL_DIR:
+
+    skill.yaml, skill.json, arrays.npz, pcae.safetensors   the skill (Skill.load reads it)
+    goal_model.png      the goal HMM as a graph: states, transitions, values,
+                        initial (blue) and terminal (green) states, a cloud per state
+    demo_returns.png    the dense return of each demonstration against time
+"""
+
+from __future__ import annotations
+
+from drake_skill.common import SKILLS
+import argparse
+from pathlib import Path
+
+import numpy as np
+
+
+def _state_clouds(skill, demos):
+    """For each HMM state, the demonstration cloud whose frame is most likely in it."""
+    best = {}
+    for demo in demos:
+        G = skill.goal_data(demo.object_points, demo.perception_valid)
+        _, post, _ = skill.pomrp.posteriors(G)   # smoothed (T, k)
+        for s in range(post.shape[1]):
+            t = int(np.argmax(post[:, s]))
+            if post[t, s] > best.get(s, (-1.0, None))[0]:
+                best[s] = (post[t, s], np.asarray(demo.object_points[t]))
+    return [best.get(s, (0, None))[1] for s in range(skill.pomrp.n_states)]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="drake-skill fit", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--demos", type=Path, required=True, help="folder of demo_*.npz files")
+    parser.add_argument("--out", type=Path, required=True, help="skill folder to write")
+    parser.add_argument("--config", type=Path, help="SkillConfig YAML (defaults: thesis values)")
+    parser.add_argument("--skill", choices=SKILLS,
+                        help="skill name (default: read from the demonstrations)")
+    parser.add_argument("--seed", type=int, help="picks the demonstration policy search starts from")
+    parser.add_argument("--force", action="store_true", help="replace an existing skill in --out")
+    args = parser.parse_args(argv)
+
+    from pydrake.common.yaml import yaml_load_typed
+
+    from drake_skill.demos.format import load_demonstrations
+    from drake_skill.reward.plots import plot_goal_model, plot_return
+    from drake_skill.skill import SkillConfig, default_skill_config, fit_skill
+
+    if (args.out / "skill.json").exists() and not args.force:
+        parser.error(f"{args.out} already holds a skill; pass --force to replace it")
+    demos = load_demonstrations(args.demos)
+    if not demos:
+        parser.error(f"{args.demos}: no demo_*.npz files")
+    skill_name = args.skill or demos[0].skill
+    config = default_skill_config(skill_name)
+    if args.config:
+        config = yaml_load_typed(schema=SkillConfig, filename=str(args.config), defaults=config)
+    if args.seed is not None:
+        config.seed = args.seed
+    print(f"fitting '{skill_name}' from {len(demos)} demonstrations in {args.demos} ...")
+    skill = fit_skill(demos, config)
+    skill.save(args.out, overwrite=args.force)
+    print(skill.summary())
+    plot_goal_model(skill.pomrp, args.out / "goal_model.png", clouds=_state_clouds(skill, demos),
+                    title=f"goal model of '{skill_name}'")
+    rewards = {f"demo {i}": skill.pomrp.rewards(skill.goal_data(d.object_points, d.perception_valid))
+               for i, d in enumerate(demos)}
+    plot_return(rewards, args.out / "demo_returns.png")
+    print(f"wrote {args.out}/ (skill.yaml, skill.json, arrays.npz, pcae.safetensors, "
+          "goal_model.png, demo_returns.png)")
+    return 0

@@ -1,0 +1,39 @@
+"""What every box shares, with no Drake import: the skill names, the size of an
+object cloud, the camera's look-at pose."""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: The skills of the thesis (section 6): Open and Close a lidded box, Draw a drawer.
+SKILLS = ("open", "close", "draw")
+
+#: Points per segmented object cloud, the PCAE's input size N (docs/method.md section 3).
+N_POINTS = 2048
+
+
+def look_at(eye, target, roll_rad: float = 0.0) -> np.ndarray:
+    """4x4 pose X_WC [m] of a camera at ``eye`` looking at ``target`` (world frame, z up).
+
+    Drake's camera convention: +z along the optical axis, +x right, +y down;
+    ``roll_rad`` turns the camera about its optical axis. Raises ValueError
+    when eye and target coincide or the view is vertical (the roll is then
+    undefined).
+    """
+    eye = np.asarray(eye, dtype=np.float64)
+    fwd = np.asarray(target, dtype=np.float64) - eye
+    n = np.linalg.norm(fwd)
+    if n < 1e-9:
+        raise ValueError(f"look_at: eye {eye} and target {target} coincide")
+    fwd /= n
+    right = np.cross(fwd, [0.0, 0.0, 1.0])
+    if np.linalg.norm(right) < 1e-6:
+        raise ValueError(f"look_at: view direction {fwd} is vertical; the camera roll is undefined")
+    right /= np.linalg.norm(right)
+    down = np.cross(fwd, right)
+    c, s = np.cos(roll_rad), np.sin(roll_rad)
+    roll = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    X = np.eye(4)
+    X[:3, :3] = np.stack([right, down, fwd], axis=1) @ roll
+    X[:3, 3] = eye
+    return X

@@ -1,0 +1,2 @@
+"""Demonstrations: the file format (``format``), the scripted demonstrator
+(``demonstrator``) and Meshcat teleoperation (``teleop``)."""

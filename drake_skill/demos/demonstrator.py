@@ -1,0 +1,468 @@
+"""Scripted demonstrator: Open, Close and Draw shown in the simulated station.
+
+The simulation's stand-in for the thesis' kinesthetic demonstrations (section
+6.2: 3 Open, 2 Close, 2 Draw). The keyframes of ``drake_skill.station.scripted`` (in
+the object frame O) are interpolated with human-like, seeded variation and
+played into the station; the demonstration records what a kinesthetic
+recording would:
+
+* action data (thesis 6.3): the *measured* hand pose X_WE at 100 Hz,
+  expressed in the object frame, X_OE = X_WO^-1 X_WE. X_WO is the object's
+  *ground-truth* pose at the start of the demonstration (the simulator knows
+  it; the base is locked, so it does not change). In free space the hand
+  follows its command within a few millimetres; in contact the command
+  lies inside the object (the joint impedance turns that offset into the
+  pushing force) while the measured hand stays where the object stops it,
+  centimetres away. The record keeps the measured path only, so replaying
+  it as a command pushes less than the demonstration did: our analogue of
+  kinesthetic teaching changing the dynamics, one of the two reasons the
+  thesis gives for the initial imitation being imperfect (the other,
+  non-expert demonstrations, is the variation below). The 10 Hz action
+  data are the 100 Hz samples taken uniformly (every 10th, last kept).
+* perceptual data: the camera's cloud at 10 Hz (the camera frames are the
+  10 Hz action instants), segmented at once (``drake_skill.perception.segmentation``)
+  to the object's 2048 points, a validity flag, and the perceived X_WO at the
+  first frame. The full 640 x 480 clouds are not kept: 100 frames of
+  307,200 points are ~370 MB per demonstration.
+
+Human-like variation (``DemonstratorConfig``, all drawn from the seed):
+per-segment timing scale and via-point position noise (``scripted_plan``), a
+constant grasp offset for the whole demonstration (a person puts the hand in
+a slightly different place each time), small orientation noise, a
+hesitation pause at a random keyframe, and an overshoot of the approach.
+
+A variation can fail (the finger misses the lid lip); the demonstrator then
+tries the next seed, so the recorded ``seed`` is the one that succeeded, and
+``metadata["rejected_seeds"]`` lists the ones that did not.
+
+    demos = ScriptedDemonstrator("open", DemonstratorConfig(count=3)).record_many()
+"""
+
+import dataclasses as dc
+import math
+from typing import Callable
+
+import numpy as np
+from pydrake.common.yaml import yaml_load_typed
+from pydrake.common.eigen_geometry import AngleAxis
+from pydrake.math import RigidTransform, RotationMatrix
+
+from drake_skill.demos.format import Demonstration, downsample_action, object_frame_poses
+from drake_skill.station.pose_source import PosePlan
+from drake_skill.station.simulation import DivergedError, StationSimulation, pose_to_vector
+from drake_skill.station.config import SKILLS, StationConfig, scenario_for_skill
+
+#: Thesis section 6.2: demonstrations per skill.
+DEFAULT_COUNTS = {"open": 3, "close": 2, "draw": 2}
+
+
+@dc.dataclass
+class DemonstratorConfig:
+    """How the scripted demonstrator varies and records its demonstrations.
+
+    count: demonstrations to record; 0 means the thesis' number for the skill
+      (3 Open, 2 Close, 2 Draw).
+    seed: the first seed tried. Demonstration i uses the i-th seed (from
+      ``seed`` upward) whose variation succeeds; the seed also draws the
+      object's pose on the table.
+    time_scale_range: each keyframe segment's duration is scaled by a factor
+      uniform in [1 - r, 1 + r].
+    path_noise: standard deviation of the Gaussian noise on every via point [m].
+    grasp_offset: standard deviation of one constant offset added to every
+      keyframe of a demonstration, per axis of O [m].
+    orientation_noise_deg: standard deviation of a random rotation (about a
+      random axis) of each via point's hand orientation [deg].
+    pause_probability: probability of a hesitation at one random keyframe.
+    pause_range: its duration, uniform in [min, max] [s].
+    overshoot: the approach (first move from home) goes this far past its
+      target before settling back [m]; scaled by a uniform factor in [0.5, 1].
+    settle_time: the last keyframe is held this long before the recording ends [s].
+    max_attempts: seeds tried per demonstration before giving up.
+    record_hz: rate of the raw action data [Hz] (the thesis: 100).
+    action_hz: rate of the downsampled action data [Hz] (the thesis: 10);
+      record_hz must be an integer multiple of it, and the camera runs at it.
+    record_perception: render and segment the camera at action_hz (off:
+      faster, no perception fields; the station is built without a camera).
+
+    How the variation sets the quality of plain DMP imitation (one DMP fitted
+    to one demonstration's 10 Hz X_OE, executed in the object frame on
+    randomised object poses with the ground-truth X_WO; measured with this
+    station and scripts as of this writing; greedy successes per demonstration):
+    Open, B = 20: these defaults 0 / 0 / 0 of 20 poses; no variation at all
+    8 / 8 / 0 of 10; light noise (time 0.1, path and grasp 1 mm, 0.5 deg,
+    overshoot 1 cm) without pauses 6 / 5 / 4 of 6, with a 0.1-0.3 s pause
+    6 / 4 / 0 of 6. The hesitation pause hurts the imitation most. Close,
+    B = 10: these defaults 0 / 0 of 20, no variation 0 / 0 of 5: the finger
+    never reaches the lid; the 10-basis fit is up to 6 cm off the
+    demonstrated path (the raw demonstration replayed succeeds).
+    """
+
+    count: int = 0
+    seed: int = 0
+    time_scale_range: float = 0.2
+    path_noise: float = 0.003
+    grasp_offset: float = 0.004
+    orientation_noise_deg: float = 2.0
+    pause_probability: float = 0.5
+    pause_range: list[float] = dc.field(default_factory=lambda: [0.2, 0.8])
+    overshoot: float = 0.02
+    settle_time: float = 0.5
+    max_attempts: int = 10
+    record_hz: float = 100.0
+    action_hz: float = 10.0
+    record_perception: bool = True
+
+    def validate(self) -> "DemonstratorConfig":
+        """Raises ValueError naming the field that cannot work; returns self."""
+        def bad(field, value, expected):
+            raise ValueError(f"demonstrator config field '{field}' = {value!r}: expected {expected}")
+
+        if self.count < 0:
+            bad("count", self.count, "0 (thesis default) or a positive number of demonstrations")
+        if not 0.0 <= self.time_scale_range < 1.0:
+            bad("time_scale_range", self.time_scale_range, "a fraction in [0, 1)")
+        for name in ("path_noise", "grasp_offset", "orientation_noise_deg", "overshoot", "settle_time"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                bad(name, value, "a finite value >= 0")
+        if not 0.0 <= self.pause_probability <= 1.0:
+            bad("pause_probability", self.pause_probability, "a probability in [0, 1]")
+        if len(self.pause_range) != 2 or not 0 <= self.pause_range[0] <= self.pause_range[1]:
+            bad("pause_range", self.pause_range, "[min, max] with 0 <= min <= max [s]")
+        if self.max_attempts < 1:
+            bad("max_attempts", self.max_attempts, "at least 1")
+        if not (self.action_hz > 0 and self.record_hz >= self.action_hz):
+            bad("record_hz/action_hz", (self.record_hz, self.action_hz), "0 < action_hz <= record_hz")
+        ratio = self.record_hz / self.action_hz
+        if abs(ratio - round(ratio)) > 1e-9:
+            bad("record_hz/action_hz", (self.record_hz, self.action_hz),
+                "record_hz an integer multiple of action_hz")
+        return self
+
+    def count_for(self, skill: str) -> int:
+        return self.count if self.count > 0 else DEFAULT_COUNTS[skill]
+
+
+def load_demonstrator_config(path=None, *, data: str | None = None) -> DemonstratorConfig:
+    """A DemonstratorConfig from a YAML file or string (missing keys keep their defaults)."""
+    if (path is None) == (data is None):
+        raise ValueError("give exactly one of path= or data=")
+    try:
+        config = yaml_load_typed(schema=DemonstratorConfig, filename=None if path is None else str(path),
+                                 data=data, defaults=DemonstratorConfig())
+    except RuntimeError as e:
+        raise ValueError(f"demonstrator config ({path or 'YAML'}): {e}") from e
+    return config.validate()
+
+
+# --------------------------------------------------------------------------- variation
+def humanlike_plan(skill: str, X_WO: RigidTransform, X_WE_home: RigidTransform, seed: int,
+                   config: DemonstratorConfig) -> tuple[PosePlan, dict]:
+    """The scripted keyframes of ``skill`` with the seeded variation of ``config``.
+
+    Returns the plan (world frame, starts at home at t = 0) and a JSON-able
+    description of the variation drawn (for the file's metadata).
+    """
+    from drake_skill.station.scripted import keyframes
+
+    rng = np.random.default_rng([int(seed), 0x5EED])
+    frames = keyframes(skill)
+    offset = rng.normal(0.0, config.grasp_offset, size=3)
+    # Per keyframe: duration scale, position noise, orientation noise.
+    n = len(frames)
+    scales = rng.uniform(1 - config.time_scale_range, 1 + config.time_scale_range, size=n)
+    noise = rng.normal(0.0, config.path_noise, size=(n, 3))
+    axes = rng.normal(size=(n, 3))
+    angles = np.deg2rad(rng.normal(0.0, config.orientation_noise_deg, size=n))
+    pause_at = int(rng.integers(0, n)) if rng.uniform() < config.pause_probability else -1
+    pause = float(rng.uniform(*config.pause_range))
+    overshoot = config.overshoot * float(rng.uniform(0.5, 1.0))
+
+    times, poses, grip = [0.0], [X_WE_home], [float(frames[0][3])]
+    t, t_key_prev = 0.0, 0.0
+    for i, (t_key, p_OE, R_OE, opening) in enumerate(frames):
+        dt = (t_key - t_key_prev) * scales[i]
+        t_key_prev = t_key
+        axis = axes[i] / np.linalg.norm(axes[i])
+        R = RotationMatrix(AngleAxis(angles[i], axis)) @ R_OE
+        X_WE = X_WO @ RigidTransform(R, p_OE + offset + noise[i])
+        if i == 0 and overshoot > 0:
+            # Approach overshoot: 80 % of the way in, pass the target, settle back.
+            p0, p1 = X_WE_home.translation(), X_WE.translation()
+            direction = (p1 - p0) / max(np.linalg.norm(p1 - p0), 1e-9)
+            times.append(t + 0.85 * dt)
+            poses.append(RigidTransform(X_WE.rotation(), p1 + overshoot * direction))
+            grip.append(float(opening))
+            dt += 0.3 * dt
+        if dt <= 1e-3:          # a keyframe repeated at the same time: a scripted pause of 0 s
+            dt = 1e-3
+        t += dt
+        times.append(t)
+        poses.append(X_WE)
+        grip.append(float(opening))
+        if i == pause_at and pause > 0:
+            t += pause
+            times.append(t)
+            poses.append(X_WE)
+            grip.append(float(opening))
+    variation = {"grasp_offset_m": offset.tolist(), "time_scales": scales.tolist(),
+                 "pause_after_keyframe": pause_at, "pause_s": pause if pause_at >= 0 else 0.0,
+                 "overshoot_m": overshoot}
+    return PosePlan.from_poses(times, poses, grip), variation
+
+
+# --------------------------------------------------------------------------- perception
+class DemonstrationPerception:
+    """Segments camera frames into the object's points (``drake_skill.perception.segmentation``).
+
+    Uses the configuration of the ObjectSegmenter that skill executions use
+    (``object_segmenter.segmenter_config_for_station``): the same thresholds,
+    table-plane fit on the first frame and resampling seed, so a
+    demonstration's object points are what that system outputs for the same
+    frames. One difference: for an invalid frame (object not found) this
+    gives zeros and valid = False, where the system holds its last valid
+    frame. Plain numpy; the caller owns the station and its camera.
+    """
+
+    def __init__(self, segmenter_config):
+        self.config = segmenter_config.validate()
+        self.image_shape = (int(segmenter_config.image_height), int(segmenter_config.image_width))
+        self._plane = None
+
+    def start(self, xyz: np.ndarray) -> None:
+        """Fits the table plane on the first frame. xyz: (P, 3) world [m]."""
+        from drake_skill.perception.segmentation import fit_table_plane
+
+        self._plane = fit_table_plane(xyz, self.config.segmentation, self.image_shape, seed=self.config.seed)
+
+    def frame(self, xyz: np.ndarray, rgb: np.ndarray):
+        """One frame -> (points (n_points, 3) float32 [m, W], valid, X_WO (7,) or None).
+
+        xyz: (P, 3) float [m], rgb: (P, 3) uint8, the organised cloud.
+        """
+        from drake_skill.perception.segmentation import process_frame
+
+        if self._plane is None:
+            raise ValueError("DemonstrationPerception.frame called before start()")
+        result = process_frame(xyz, rgb, self._plane, self.config.segmentation, self.image_shape,
+                               n_points=self.config.n_points, seed=self.config.seed)
+        if not result.valid:
+            return np.zeros((self.config.n_points, 3), np.float32), False, None
+        X_WO = RigidTransform(RotationMatrix.MakeZRotation(result.box.yaw), result.box.position)
+        return result.points.astype(np.float32), True, pose_to_vector(X_WO)
+
+
+# --------------------------------------------------------------------------- recording
+class StationRecorder:
+    """Samples a running station: hand pose, joints, object state at ``record_hz``,
+    and the camera at ``action_hz``, on one grid whose every k-th sample is a
+    camera frame (k = record_hz / action_hz).
+
+    The grid is anchored at a camera frame time. Drake handles a discrete
+    update due at time t at the start of the step *after* t, so at a camera
+    instant the recorder advances to the event's exact time and then
+    processes the pending events, which refreshes the held image to the
+    scene at that instant (otherwise the cloud would be one frame old).
+    """
+
+    def __init__(self, station, root_context, simulator, record_hz: float = 100.0,
+                 action_hz: float = 10.0, perception: DemonstrationPerception | None = None):
+        self.station = station
+        self.simulator = simulator
+        self.root_context = root_context
+        self.context = station.GetMyContextFromRoot(root_context)
+        self.record_hz, self.action_hz = float(record_hz), float(action_hz)
+        self.k = int(round(record_hz / action_hz))
+        self.perception = perception
+        if perception is not None:
+            fps = station.config.camera.fps
+            if fps != action_hz:
+                raise ValueError(f"camera.fps = {fps} Hz: recording perception needs the camera "
+                                 f"at action_hz = {action_hz} Hz")
+        # The same float the camera's sample-and-hold uses, so k * period is
+        # exactly its event time.
+        self._camera_period = 1.0 / self.action_hz
+        self._ports = {name: station.GetOutputPort(name)
+                       for name in ("ee_pose", "panda_state", "object_state")}
+        self.reset()
+
+    def reset(self) -> None:
+        self.X_WE, self.q, self.obj, self.grip, self.points, self.valid = [], [], [], [], [], []
+        self.X_WO_perceived, self.X_WO_frame = None, None
+        self._frame0 = None
+        self._n = 0
+
+    def anchor(self) -> float:
+        """Starts the grid at the first camera frame time at or after now; returns it."""
+        t = self.root_context.get_time()
+        frame = int(math.ceil(t / self._camera_period - 1e-9))
+        self._frame0 = frame
+        return frame * self._camera_period
+
+    def next_time(self) -> float:
+        """Time [s] of the next sample on the grid (nominal)."""
+        return self._frame0 * self._camera_period + self._n / self.record_hz
+
+    def sample(self, gripper_command: float) -> None:
+        """Advances to the next grid time and records it (camera frames included)."""
+        if self._frame0 is None:
+            raise ValueError("StationRecorder.sample called before anchor()")
+        i = self._n
+        t = self.next_time()
+        if i % self.k == 0:
+            t_frame = (self._frame0 + i // self.k) * self._camera_period
+            self.simulator.AdvanceTo(max(t, t_frame))
+            self.simulator.AdvancePendingEvents()
+            if self.perception is not None:
+                self._perceive(i // self.k)
+        else:
+            self.simulator.AdvanceTo(max(t, self.root_context.get_time()))
+        state = self._ports["panda_state"].Eval(self.context)
+        if not np.all(np.isfinite(state)):
+            raise DivergedError(f"simulation diverged at t = {t:.3f} s")
+        self.X_WE.append(pose_to_vector(self._ports["ee_pose"].Eval(self.context)))
+        self.q.append(state[:7].copy())
+        self.obj.append(float(self._ports["object_state"].Eval(self.context)[0]))
+        self.grip.append(float(gripper_command))
+        self._n += 1
+
+    def _perceive(self, frame_index: int) -> None:
+        cloud = self.station.GetOutputPort("point_cloud").Eval(self.context)
+        xyz, rgb = cloud.xyzs().T, cloud.rgbs().T
+        if frame_index == 0:
+            self.perception.start(xyz)
+        points, valid, X_WO = self.perception.frame(xyz, rgb)
+        if X_WO is not None and self.X_WO_perceived is None:
+            self.X_WO_perceived, self.X_WO_frame = X_WO, frame_index
+        self.points.append(points)
+        self.valid.append(valid)
+
+    @property
+    def n_samples(self) -> int:
+        return self._n
+
+    @property
+    def at_frame(self) -> bool:
+        """True when the last recorded sample was a camera frame (a clean end of the grid)."""
+        return self._n > 0 and (self._n - 1) % self.k == 0
+
+    def demonstration(self, skill: str, seed: int, X_WO_true: RigidTransform, success: bool,
+                      metadata: dict) -> Demonstration:
+        """Assembles the recorded samples into a Demonstration (times start at 0)."""
+        if not self.at_frame:
+            raise ValueError("recording must end on a camera frame (call sample() until at_frame)")
+        times = np.arange(self._n) / self.record_hz
+        X_WO = pose_to_vector(X_WO_true)
+        X_OE_raw = object_frame_poses(X_WO, np.array(self.X_WE))
+        idx, t10, X_OE = downsample_action(times, X_OE_raw, self.action_hz)
+        perception = {}
+        if self.perception is not None:
+            if len(self.points) != idx.size:
+                raise AssertionError(f"{len(self.points)} camera frames for {idx.size} 10 Hz samples")
+            if self.X_WO_perceived is None:
+                raise ValueError(f"{skill} seed {seed}: the segmentation found the object in none of "
+                                 f"the {len(self.points)} camera frames")
+            perception = dict(object_points=np.stack(self.points).astype(np.float32),
+                              perception_valid=np.array(self.valid, dtype=bool),
+                              X_WO_start=self.X_WO_perceived)
+            metadata = dict(metadata, X_WO_start_frame=int(self.X_WO_frame))
+        obj = np.array(self.obj)
+        return Demonstration(
+            skill=skill, seed=int(seed), success=bool(success), final_object_state=float(obj[-1]),
+            times_100hz=times, X_OE_100hz=X_OE_raw, q_100hz=np.array(self.q),
+            gripper_100hz=np.array(self.grip), object_state_100hz=obj,
+            times=t10, X_OE=X_OE, X_WO_true=X_WO, metadata=metadata, **perception)
+
+
+def make_perception(station) -> DemonstrationPerception:
+    """Segmentation matched to the station (image size, camera rate, nominal object pose)."""
+    from drake_skill.perception.systems import segmenter_config_for_station
+
+    return DemonstrationPerception(segmenter_config_for_station(station.config))
+
+
+# --------------------------------------------------------------------------- demonstrator
+class ScriptedDemonstrator:
+    """Records scripted, human-like demonstrations of one skill in one built station.
+
+    skill: "open", "close" or "draw"; config: the variation and recording
+    settings; station_config: the scenario (default ``scenario_for_skill``;
+    its camera is switched off when ``config.record_perception`` is false).
+    """
+
+    def __init__(self, skill: str, config: DemonstratorConfig | None = None,
+                 station_config: StationConfig | None = None, meshcat=None):
+
+        if skill not in SKILLS:
+            raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
+        self.skill = skill
+        self.config = (config or DemonstratorConfig()).validate()
+        station_config = station_config or scenario_for_skill(skill)
+        if not self.config.record_perception:
+            station_config.enable_camera = False
+        elif not station_config.enable_camera:
+            raise ValueError("record_perception needs a station with enable_camera = true")
+        self.sim = StationSimulation(station_config, meshcat=meshcat)
+
+    def record(self, seed: int) -> Demonstration:
+        """One demonstration on the object pose and variation drawn from ``seed``.
+
+        Deterministic: the same seed gives the same arrays. ``success`` is the
+        ground-truth verdict; it may be False (see :meth:`record_many`).
+        """
+        sim, config = self.sim, self.config
+        X_WO = sim.reset(seed)
+        plan, variation = humanlike_plan(self.skill, X_WO, sim.home_pose(), seed, config)
+        sim.set_plan(plan)
+        perception = make_perception(sim.station) if config.record_perception else None
+        recorder = StationRecorder(sim.station, sim.context, sim.simulator, config.record_hz,
+                                   config.action_hz, perception)
+        recorder.anchor()
+        duration = plan.duration + config.settle_time
+        n = int(math.ceil(duration * config.action_hz - 1e-9)) * recorder.k + 1
+        for _ in range(n):
+            recorder.sample(plan.opening(recorder.next_time()))
+        success = sim.judge(self.skill, recorder.obj[-1])
+        metadata = {"source": "scripted", "variation": variation,
+                    "demonstrator_config": dc.asdict(config),
+                    "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
+        return recorder.demonstration(self.skill, seed, X_WO, success, metadata)
+
+    def record_many(self, count: int | None = None, progress: bool = True,
+                    on_attempt: Callable[[int, Demonstration], None] | None = None) -> list[Demonstration]:
+        """``count`` (default: config) successful demonstrations on successive seeds.
+
+        A seed whose variation fails is skipped (the next seed is tried; at
+        most ``max_attempts`` per demonstration, else RuntimeError). Each
+        demonstration's ``metadata["rejected_seeds"]`` lists the seeds skipped
+        just before it.
+        """
+        from tqdm import tqdm
+
+        count = self.config.count_for(self.skill) if count is None else int(count)
+        demos, seed = [], int(self.config.seed)
+        bar = tqdm(total=count, desc=f"{self.skill} demonstrations", unit="demo", disable=not progress)
+        try:
+            for _ in range(count):
+                rejected = []
+                for _attempt in range(self.config.max_attempts):
+                    demo = self.record(seed)
+                    if on_attempt is not None:
+                        on_attempt(seed, demo)
+                    seed += 1
+                    if demo.success:
+                        break
+                    rejected.append(seed - 1)
+                    bar.set_postfix_str(f"seed {seed - 1} failed ({demo.final_object_state:.3f}); retrying")
+                else:
+                    raise RuntimeError(
+                        f"{self.skill}: {self.config.max_attempts} variations in a row failed "
+                        f"(seeds {rejected[0]}..{rejected[-1]}); reduce the variation "
+                        "(time_scale_range, path_noise, grasp_offset, overshoot)")
+                demo.metadata["rejected_seeds"] = rejected
+                demos.append(demo)
+                bar.set_postfix_str(f"seed {demo.seed}: {demo.final_object_state:.3f}")
+                bar.update(1)
+        finally:
+            bar.close()
+        return demos

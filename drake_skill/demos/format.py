@@ -1,0 +1,402 @@
+"""Demonstration files: one ``.npz`` per demonstration, validated on save and load.
+
+Plain numpy, no Drake import. docs/method.md section 1 / thesis section 6.3: a
+demonstration gives *action data* (the hand pose in the object frame, recorded
+at 100 Hz and sampled uniformly down to 10 Hz) and *perceptual data* (the
+camera at 10 Hz; here the segmented object's points, see below).
+
+Frames and units (SI: m, rad, s):
+
+* W: world frame of the station (robot base at the origin, z up).
+* O: object frame (see ``drake_skill.station.scripted``): origin at the centre of the
+  object's bottom face, x away from the robot, z up.
+* E: the hand's tool centre point (the station's ``ee_pose`` port).
+* Poses are 7-vectors ``[x, y, z, qw, qx, qy, qz]``: translation [m] and unit
+  quaternion (scalar first, Hamilton), e.g. ``X_OE`` is the pose of E in O.
+
+Fields of :class:`Demonstration` (T raw samples at 100 Hz, T10 at 10 Hz):
+
+=====================  ==============  =========================================
+``times_100hz``        (T,) float64    s from the start of the demonstration
+``X_OE_100hz``         (T, 7) float64  *measured* hand pose in O
+``q_100hz``            (T, 7) float64  measured Panda joint positions [rad]
+``gripper_100hz``      (T,) float64    commanded finger opening [m]
+``object_state_100hz`` (T,) float64    lid angle [rad] / drawer travel [m]
+                                       (simulator ground truth; never a reward)
+``times``              (T10,) float64  the 10 Hz sample times (a subset of
+                                       ``times_100hz``, last sample kept)
+``X_OE``               (T10, 7)        action data at 10 Hz (what a DMP fits)
+``X_WO_true``          (7,) float64    ground-truth object pose at the start;
+                                       X_OE = X_WO_true^-1 X_WE (simulation)
+``X_WO_start``         (7,) float64    *perceived* object pose at the start
+                                       (segmented cloud's box centre), or None
+``object_points``      (T10, N, 3)     segmented object points in W [m],
+                       float32         N = 2048 (docs/method.md section 3), or None
+``perception_valid``   (T10,) bool     segmentation found the object, or None
+``skill``, ``seed``, ``success``, ``final_object_state``
+                                       what was demonstrated, the seed that
+                                       produced it, the ground-truth verdict
+``metadata``           dict            JSON-serialisable extras (source,
+                                       demonstrator settings, attempts, ...)
+=====================  ==============  =========================================
+
+The camera's full clouds are *not* stored: 640 x 480 = 307,200 points per
+frame, 100 frames for a 10 s demonstration, ~370 MB as float32 xyz + rgb.
+The segmented object (2048 points per frame, ~8 MB per demonstration) is what
+the goal model uses.
+
+File format (``SCHEMA_VERSION`` = 1): a numpy ``.npz`` written atomically,
+readable with ``np.load(path, allow_pickle=False)``. Every field above is an
+array of the same name (``skill`` a 0-d unicode array, ``seed`` int64,
+``success`` bool, ``final_object_state`` float64); ``metadata`` is a 0-d
+unicode array holding a JSON object with ``schema``, ``schema_version``,
+``units``, ``frames``, ``rates_hz`` and the extras. The perception fields are
+absent when the demonstration was recorded without a camera
+(``metadata["has_perception"]`` is false).
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drake_skill.common import N_POINTS, SKILLS
+from drake_skill.fileio import atomic_save_npz, load_npz
+from drake_skill.action.quaternion import make_quaternions_continuous, quat_conjugate, quat_multiply
+
+__all__ = [
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "MIN_SAMPLES",
+    "N_POINTS",
+    "Demonstration",
+    "DemonstrationError",
+    "object_frame_poses",
+    "downsample_action",
+    "save_demonstration",
+    "load_demonstration",
+    "load_demonstrations",
+    "demo_path",
+    "existing_demo_files",
+]
+
+SCHEMA = "drake-skill-demonstration"
+SCHEMA_VERSION = 1
+#: Fewest 10 Hz samples a demonstration may have (1 s of motion).
+MIN_SAMPLES = 10
+QUATERNION_TOLERANCE = 1e-3
+ACTION_RAW_HZ = 100.0
+ACTION_HZ = 10.0
+
+UNITS = {
+    "times_100hz": "s", "times": "s", "X_OE_100hz": "m, unit quaternion wxyz",
+    "X_OE": "m, unit quaternion wxyz", "q_100hz": "rad", "gripper_100hz": "m",
+    "object_state_100hz": "rad (box lid angle) or m (drawer travel)",
+    "X_WO_true": "m, unit quaternion wxyz", "X_WO_start": "m, unit quaternion wxyz",
+    "object_points": "m", "final_object_state": "rad (box lid angle) or m (drawer travel)",
+}
+FRAMES = {
+    "X_OE_100hz": "pose of the hand TCP frame E in the object frame O",
+    "X_OE": "pose of the hand TCP frame E in the object frame O",
+    "X_WO_true": "ground-truth pose of O in the world W at the start (simulation)",
+    "X_WO_start": "perceived pose of O in W at the start (segmented cloud's bounding-box centre)",
+    "object_points": "segmented object points, world frame W",
+}
+
+_RAW = ("times_100hz", "X_OE_100hz", "q_100hz", "gripper_100hz", "object_state_100hz")
+_PERCEPTION = ("X_WO_start", "object_points", "perception_valid")
+_SCALARS = ("skill", "seed", "success", "final_object_state")
+
+
+class DemonstrationError(ValueError):
+    """A demonstration (in memory or on disk) does not satisfy the schema."""
+
+
+def _fail(where: str, field: str, message: str):
+    raise DemonstrationError(f"{where}: field '{field}' {message}")
+
+
+@dc.dataclass
+class Demonstration:
+    """One demonstration (see the module docstring for every field's shape, unit and frame)."""
+
+    skill: str
+    seed: int
+    success: bool
+    final_object_state: float
+    times_100hz: np.ndarray
+    X_OE_100hz: np.ndarray
+    q_100hz: np.ndarray
+    gripper_100hz: np.ndarray
+    object_state_100hz: np.ndarray
+    times: np.ndarray
+    X_OE: np.ndarray
+    X_WO_true: np.ndarray
+    X_WO_start: np.ndarray | None = None
+    object_points: np.ndarray | None = None
+    perception_valid: np.ndarray | None = None
+    metadata: dict[str, Any] = dc.field(default_factory=dict)
+    #: The file it was loaded from (not stored in the file; None when recorded in memory).
+    path: str | None = dc.field(default=None, compare=False)
+
+    @property
+    def has_perception(self) -> bool:
+        return self.object_points is not None
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first to the last raw sample."""
+        return float(self.times_100hz[-1] - self.times_100hz[0])
+
+    @property
+    def n_samples(self) -> int:
+        """Number of 10 Hz samples (T10)."""
+        return int(self.times.shape[0])
+
+    def validate(self, where: str = "demonstration") -> "Demonstration":
+        """Checks every field; raises DemonstrationError naming ``where`` and the field."""
+        if self.skill not in SKILLS:
+            _fail(where, "skill", f"is {self.skill!r}; expected one of {', '.join(SKILLS)}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, (int, np.integer)):
+            _fail(where, "seed", f"is {self.seed!r}; expected an integer")
+        if not isinstance(self.success, (bool, np.bool_)):
+            _fail(where, "success", f"is {self.success!r}; expected a bool")
+        if not math.isfinite(float(self.final_object_state)):
+            _fail(where, "final_object_state", f"is {self.final_object_state!r}; expected a finite number")
+        t_raw = _times(where, "times_100hz", self.times_100hz, MIN_SAMPLES)
+        n = t_raw.shape[0]
+        _poses(where, "X_OE_100hz", self.X_OE_100hz, n)
+        _array(where, "q_100hz", self.q_100hz, (n, 7))
+        _array(where, "gripper_100hz", self.gripper_100hz, (n,))
+        _array(where, "object_state_100hz", self.object_state_100hz, (n,))
+        t10 = _times(where, "times", self.times, MIN_SAMPLES)
+        m = t10.shape[0]
+        if t10[0] < t_raw[0] - 1e-9 or t10[-1] > t_raw[-1] + 1e-9:
+            _fail(where, "times", f"spans {t10[0]:.3f}..{t10[-1]:.3f} s, outside times_100hz "
+                  f"{t_raw[0]:.3f}..{t_raw[-1]:.3f} s")
+        _poses(where, "X_OE", self.X_OE, m)
+        _poses(where, "X_WO_true", self.X_WO_true, None)
+        present = [name for name in _PERCEPTION if getattr(self, name) is not None]
+        if present and len(present) != len(_PERCEPTION):
+            missing = sorted(set(_PERCEPTION) - set(present))
+            _fail(where, missing[0], f"is missing while {', '.join(present)} "
+                  "is present; perception fields come together")
+        if present:
+            _poses(where, "X_WO_start", self.X_WO_start, None)
+            pts = self.object_points
+            if not isinstance(pts, np.ndarray) or pts.dtype != np.float32 or pts.ndim != 3 \
+                    or pts.shape[0] != m or pts.shape[2] != 3 or pts.shape[1] < 1:
+                _fail(where, "object_points", f"has shape {getattr(pts, 'shape', None)} dtype "
+                      f"{getattr(pts, 'dtype', None)}; expected ({m}, N, 3) float32")
+            if not np.all(np.isfinite(pts)):
+                _fail(where, "object_points", "contains NaN or inf")
+            valid = self.perception_valid
+            if not isinstance(valid, np.ndarray) or valid.dtype != np.bool_ or valid.shape != (m,):
+                _fail(where, "perception_valid", f"has shape {getattr(valid, 'shape', None)} dtype "
+                      f"{getattr(valid, 'dtype', None)}; expected ({m},) bool")
+        try:
+            json.dumps(self.metadata)
+        except (TypeError, ValueError) as e:
+            _fail(where, "metadata", f"is not JSON-serialisable ({e})")
+        return self
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The arrays stored in the ``.npz`` (metadata as a JSON string)."""
+        meta = dict(self.metadata)
+        meta.update(schema=SCHEMA, schema_version=SCHEMA_VERSION, units=UNITS, frames=FRAMES,
+                    rates_hz={"action_raw": ACTION_RAW_HZ, "action": ACTION_HZ,
+                              "perception": ACTION_HZ},
+                    has_perception=self.has_perception)
+        arrays = {
+            "metadata": np.array(json.dumps(meta, sort_keys=True)),
+            "skill": np.array(str(self.skill)),
+            "seed": np.array(int(self.seed), dtype=np.int64),
+            "success": np.array(bool(self.success)),
+            "final_object_state": np.array(float(self.final_object_state)),
+            "times": self.times, "X_OE": self.X_OE, "X_WO_true": self.X_WO_true,
+        }
+        arrays.update({name: getattr(self, name) for name in _RAW})
+        if self.has_perception:
+            arrays.update({name: getattr(self, name) for name in _PERCEPTION})
+        return arrays
+
+
+# ---------------------------------------------------------------- validation
+def _array(where, field, value, shape) -> np.ndarray:
+    if not isinstance(value, np.ndarray) or value.dtype.kind != "f":
+        _fail(where, field, f"has dtype {getattr(value, 'dtype', type(value).__name__)}; "
+              "expected a floating-point array")
+    if shape is not None and value.shape != shape:
+        _fail(where, field, f"has shape {value.shape}; expected {shape}")
+    if not np.all(np.isfinite(value)):
+        bad = np.argwhere(~np.isfinite(value))[0]
+        _fail(where, field, f"contains NaN or inf (first at index {tuple(int(i) for i in bad)})")
+    return value
+
+
+def _times(where, field, value, min_len) -> np.ndarray:
+    t = _array(where, field, value, None)
+    if t.ndim != 1:
+        _fail(where, field, f"has shape {t.shape}; expected (T,)")
+    if t.shape[0] < min_len:
+        _fail(where, field, f"has {t.shape[0]} samples; expected at least {min_len}")
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0))
+        _fail(where, field, f"is not strictly increasing (t[{k}] = {t[k]:.6g} s, "
+              f"t[{k + 1}] = {t[k + 1]:.6g} s)")
+    return t
+
+
+def _poses(where, field, value, n) -> np.ndarray:
+    shape = (7,) if n is None else (n, 7)
+    x = _array(where, field, value, shape)
+    norms = np.linalg.norm(x[..., 3:], axis=-1)
+    bad = np.abs(norms - 1.0) > QUATERNION_TOLERANCE
+    if np.any(bad):
+        k = int(np.argmax(np.atleast_1d(bad)))
+        _fail(where, field, f"has a quaternion of norm {float(np.atleast_1d(norms)[k]):.6g} at "
+              f"sample {k}; expected unit norm within {QUATERNION_TOLERANCE}")
+    return x
+
+
+# ---------------------------------------------------------------- pose math
+def object_frame_poses(X_WO, X_WE) -> np.ndarray:
+    """X_OE = X_WO^-1 X_WE for poses as 7-vectors.
+
+    X_WO: (7,) object pose in W; X_WE: (T, 7) hand poses in W. Returns (T, 7)
+    with quaternion signs made continuous along T (starting on the hemisphere
+    with qw >= 0).
+    """
+    X_WO = np.asarray(X_WO, dtype=float)
+    X_WE = np.atleast_2d(np.asarray(X_WE, dtype=float))
+    q_WO = X_WO[3:] / np.linalg.norm(X_WO[3:])
+    q_OW = quat_conjugate(q_WO)
+    p = X_WE[:, :3] - X_WO[:3]
+    # p_O = R_OW p, i.e. the quaternion product q_OW (0, p) q_WO.
+    p_quat = np.concatenate([np.zeros((p.shape[0], 1)), p], axis=1)
+    p_O = quat_multiply(quat_multiply(q_OW, p_quat), q_WO)[:, 1:]
+    q_OE = quat_multiply(q_OW, X_WE[:, 3:])
+    q_OE /= np.linalg.norm(q_OE, axis=1, keepdims=True)
+    if q_OE[0, 0] < 0:
+        q_OE[0] = -q_OE[0]
+    q_OE = make_quaternions_continuous(q_OE)
+    return np.concatenate([p_O, q_OE], axis=1)
+
+
+def downsample_action(times_100hz, X_OE_100hz, rate_hz: float = ACTION_HZ):
+    """Uniform subsampling 100 Hz -> ``rate_hz`` (thesis section 6.3), last sample kept.
+
+    Returns (indices (T10,), times (T10,), X_OE (T10, 7)); the indices pick
+    the raw samples, so perception frames recorded at the same instants line up.
+    """
+    t = np.asarray(times_100hz, dtype=float)
+    rate = 1.0 / float(np.median(np.diff(t)))
+    k = int(round(rate / rate_hz))
+    if k < 1 or abs(rate / rate_hz - k) > 0.05:
+        raise ValueError(f"times_100hz: rate {rate:.3f} Hz is not an integer multiple of {rate_hz} Hz")
+    idx = np.arange(0, t.size, k)
+    if idx[-1] != t.size - 1:
+        idx = np.append(idx, t.size - 1)
+    X = np.asarray(X_OE_100hz, dtype=float)[idx].copy()
+    X[:, 3:] = make_quaternions_continuous(X[:, 3:])
+    return idx, t[idx].copy(), X
+
+
+# ---------------------------------------------------------------- files
+def demo_path(directory, index: int) -> Path:
+    """``DIR/demo_000.npz`` for index 0, and so on."""
+    return Path(directory) / f"demo_{index:03d}.npz"
+
+
+def save_demonstration(demo: Demonstration, path, force: bool = False) -> Path:
+    """Validates ``demo`` and writes it to ``path`` atomically.
+
+    Refuses (FileExistsError) to replace an existing file unless ``force``.
+    """
+    path = Path(path)
+    demo.validate(str(path))
+    if path.exists() and not force:
+        raise FileExistsError(f"{path} exists; refusing to overwrite a recorded demonstration "
+                              "(pass force=True / --force to replace it)")
+    return atomic_save_npz(path, demo.to_arrays())
+
+
+def _scalar(where, data, name, kind):
+    value = data[name]
+    if value.shape != () or value.dtype.kind not in kind:
+        _fail(where, name, f"has shape {value.shape} dtype {value.dtype}; expected a scalar of kind {kind!r}")
+    return value.item()
+
+
+def load_demonstration(path) -> Demonstration:
+    """Loads and validates one demonstration file; errors name the file and the field."""
+    path = Path(path)
+    where = str(path)
+    data = load_npz(path)   # FileNotFoundError / ValueError naming the file
+    if "metadata" not in data:
+        raise DemonstrationError(f"{where}: field 'metadata' is missing; not a drake-skill "
+                                 f"demonstration file (fields: {', '.join(sorted(data)) or 'none'})")
+    meta_arr = data["metadata"]
+    if meta_arr.shape != () or meta_arr.dtype.kind != "U":
+        _fail(where, "metadata", f"has shape {meta_arr.shape} dtype {meta_arr.dtype}; expected a JSON string")
+    try:
+        meta = json.loads(meta_arr.item())
+    except json.JSONDecodeError as e:
+        _fail(where, "metadata", f"is not valid JSON ({e})")
+    if not isinstance(meta, dict) or meta.get("schema") != SCHEMA:
+        _fail(where, "metadata", f"names schema {meta.get('schema') if isinstance(meta, dict) else None!r}; "
+              f"expected {SCHEMA!r}")
+    version = meta.get("schema_version")
+    if version != SCHEMA_VERSION:
+        _fail(where, "metadata.schema_version", f"is {version!r}; this drake-skill reads version "
+              f"{SCHEMA_VERSION}")
+    has_perception = bool(meta.get("has_perception", False))
+    required = ("times", "X_OE", "X_WO_true") + _RAW + _SCALARS + (_PERCEPTION if has_perception else ())
+    for name in required:
+        if name not in data:
+            _fail(where, name, "is missing")
+    extras = {k: v for k, v in meta.items()
+              if k not in ("schema", "schema_version", "units", "frames", "rates_hz", "has_perception")}
+    demo = Demonstration(
+        skill=_scalar(where, data, "skill", "U"),
+        seed=int(_scalar(where, data, "seed", "iu")),
+        success=bool(_scalar(where, data, "success", "b")),
+        final_object_state=float(_scalar(where, data, "final_object_state", "f")),
+        times=data["times"], X_OE=data["X_OE"], X_WO_true=data["X_WO_true"],
+        **{name: data[name] for name in _RAW},
+        **({name: data[name] for name in _PERCEPTION} if has_perception else {}),
+        metadata=extras, path=where,
+    )
+    return demo.validate(where)
+
+
+def load_demonstrations(directory, skill: str | None = None) -> list[Demonstration]:
+    """All ``demo_*.npz`` of ``directory``, sorted by file name.
+
+    With ``skill``: every file must be a demonstration of that skill.
+    Raises FileNotFoundError if the directory has none.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise FileNotFoundError(f"{directory}: no such directory")
+    paths = sorted(directory.glob("demo_*.npz"))
+    if not paths:
+        raise FileNotFoundError(f"{directory}: no demo_*.npz files")
+    demos = [load_demonstration(p) for p in paths]
+    if skill is not None:
+        for p, d in zip(paths, demos):
+            if d.skill != skill:
+                _fail(str(p), "skill", f"is {d.skill!r}; expected {skill!r} (all demonstrations of {directory})")
+    return demos
+
+
+def existing_demo_files(directory) -> list[Path]:
+    """The ``demo_*.npz`` already in ``directory`` (empty if it does not exist)."""
+    directory = Path(directory)
+    return sorted(directory.glob("demo_*.npz")) if directory.is_dir() else []

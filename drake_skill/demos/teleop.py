@@ -1,0 +1,393 @@
+"""Interactive demonstrations in Meshcat: the simulation's stand-in for kinesthetic teaching.
+
+The thesis' demonstrator moves the robot's hand by hand (section 6.2). In
+simulation the user drives the hand's desired pose from the Meshcat page
+instead, and the demonstration is recorded exactly as the scripted
+demonstrator records one (``drake_skill.demos.demonstrator.StationRecorder``):
+the measured hand pose in the object frame at 100 Hz and 10 Hz, the
+segmented object cloud at 10 Hz.
+
+Controls (the Meshcat page's control panel; keys act when the page has focus):
+
+===========  ======================  =========================================
+slider       keys (- / +)            meaning
+===========  ======================  =========================================
+x [m]        S / W                   hand position in the world, m
+y [m]        D / A                   (x away from the robot, y left, z up)
+z [m]        Q / E
+roll [deg]   J / L                   hand rotation about the world x, y, z
+pitch [deg]  K / I                   axes, applied on top of the home
+yaw [deg]    U / O                   orientation (0, 0, 0 = pointing down)
+gripper [m]  Z / X                   finger opening
+===========  ======================  =========================================
+
+Buttons: **Record** (key R) starts recording, **Stop** (key T) ends it.
+A gamepad (press one of its buttons on the page first so the browser
+exposes it) moves the hand with velocities: left stick x / y, right stick
+z (vertical) and yaw (horizontal), triggers close / open the gripper,
+button A records, B stops.
+
+Structure: :func:`teleop_step` is the whole input logic as a plain function
+(testable with fake inputs); :class:`MeshcatTeleop` is a LeafSystem that
+reads Meshcat every ``period`` seconds, applies it, and outputs
+``X_WE_desired``, ``gripper_command`` and ``mode`` (0 idle, 1 recording,
+2 done); :class:`TeleopSession` builds the station and the teleop system in
+one diagram and records a demonstration.
+"""
+
+import dataclasses as dc
+from typing import Callable
+
+import numpy as np
+from pydrake.common.value import Value
+from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
+
+from drake_skill.station.success import judge_success
+
+IDLE, RECORDING, DONE = 0, 1, 2
+MODE_NAMES = {IDLE: "idle", RECORDING: "recording", DONE: "done"}
+
+#: (slider name, decrement key, increment key) for the 7 controlled values.
+SLIDERS = (
+    ("x [m] (S/W)", "KeyS", "KeyW"),
+    ("y [m] (D/A)", "KeyD", "KeyA"),
+    ("z [m] (Q/E)", "KeyQ", "KeyE"),
+    ("roll [deg] (J/L)", "KeyJ", "KeyL"),
+    ("pitch [deg] (K/I)", "KeyK", "KeyI"),
+    ("yaw [deg] (U/O)", "KeyU", "KeyO"),
+    ("gripper [m] (Z/X)", "KeyZ", "KeyX"),
+)
+RECORD_BUTTON, RECORD_KEY = "Record (R)", "KeyR"
+STOP_BUTTON, STOP_KEY = "Stop (T)", "KeyT"
+GAMEPAD_RECORD, GAMEPAD_STOP = 0, 1          # A, B on the standard mapping
+GAMEPAD_LT, GAMEPAD_RT = 6, 7
+
+
+@dc.dataclass
+class TeleopConfig:
+    """Interactive teleoperation settings.
+
+    position_step, angle_step_deg, gripper_step: slider resolution, also the
+      change per key press [m, deg, m].
+    position_range: the x, y, z sliders span the home position +- this [m].
+    angle_range_deg: the roll, pitch, yaw sliders span +- this [deg].
+    gripper_max: largest finger opening [m].
+    gamepad_speed, gamepad_angular_speed_deg, gamepad_gripper_speed: velocities
+      at full stick / trigger [m/s, deg/s, m/s]; gamepad_deadband: stick values
+      below it are ignored.
+    period: how often the teleop system reads Meshcat [s].
+    realtime_rate: simulation speed relative to the wall clock (1: real time).
+    max_wait: give up waiting for Record after this long [s of simulation].
+    max_duration: a recording stops by itself after this long [s].
+    record_perception: render and segment the camera at 10 Hz while recording.
+    """
+
+    position_step: float = 0.005
+    angle_step_deg: float = 2.0
+    gripper_step: float = 0.005
+    position_range: float = 0.5
+    angle_range_deg: float = 180.0
+    gripper_max: float = 0.08
+    gamepad_speed: float = 0.15
+    gamepad_angular_speed_deg: float = 45.0
+    gamepad_gripper_speed: float = 0.05
+    gamepad_deadband: float = 0.1
+    period: float = 0.01
+    realtime_rate: float = 1.0
+    max_wait: float = 600.0
+    max_duration: float = 120.0
+    record_perception: bool = True
+
+
+@dc.dataclass
+class TeleopInputs:
+    """One reading of the user's inputs.
+
+    sliders: (7,) x, y, z [m, world], roll, pitch, yaw [deg, about world axes
+    on top of the home orientation], gripper [m]; record_clicks, stop_clicks:
+    the buttons' click counts; gamepad_axes: (>= 4,) in [-1, 1] or None when no
+    gamepad; gamepad_buttons: (>= 8,) in [0, 1] or None.
+    """
+
+    sliders: np.ndarray
+    record_clicks: int = 0
+    stop_clicks: int = 0
+    gamepad_axes: np.ndarray | None = None
+    gamepad_buttons: np.ndarray | None = None
+
+
+@dc.dataclass
+class TeleopState:
+    """target: (7,) as TeleopInputs.sliders; mode: IDLE / RECORDING / DONE;
+    seen_record, seen_stop: click counts already handled; gamepad_pressed: (2,)
+    record / stop gamepad buttons held at the previous step (edge detection)."""
+
+    target: np.ndarray
+    mode: int = IDLE
+    seen_record: int = 0
+    seen_stop: int = 0
+    gamepad_pressed: np.ndarray = dc.field(default_factory=lambda: np.zeros(2))
+
+    def to_vector(self) -> np.ndarray:
+        return np.r_[self.target, self.mode, self.seen_record, self.seen_stop, self.gamepad_pressed]
+
+    @classmethod
+    def from_vector(cls, v) -> "TeleopState":
+        v = np.asarray(v, dtype=float)
+        return cls(v[:7].copy(), int(round(v[7])), int(round(v[8])), int(round(v[9])), v[10:12].copy())
+
+
+STATE_SIZE = 12
+
+
+def slider_limits(X_WE_home: RigidTransform, config: TeleopConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(lower (7,), upper (7,), step (7,)) of the sliders around the home pose."""
+    p = X_WE_home.translation()
+    r, a = config.position_range, config.angle_range_deg
+    lower = np.r_[p - r, -a, -a, -a, 0.0]
+    upper = np.r_[p + r, a, a, a, config.gripper_max]
+    step = np.r_[[config.position_step] * 3, [config.angle_step_deg] * 3, config.gripper_step]
+    return lower, upper, step
+
+
+def teleop_step(state: TeleopState, inputs: TeleopInputs, dt: float, config: TeleopConfig,
+                lower: np.ndarray, upper: np.ndarray) -> tuple[TeleopState, bool]:
+    """One update of the teleoperation logic (plain numpy).
+
+    The sliders are the target (keys move the sliders in the browser); a
+    gamepad adds velocity * dt on top. Record clicks start recording from
+    IDLE, stop clicks end it; clicks in other modes are consumed and ignored.
+    Returns the new state and whether the target moved away from the sliders
+    (the caller then writes the target back to the sliders).
+    """
+    target = np.clip(np.asarray(inputs.sliders, dtype=float), lower, upper)
+    moved = False
+    record = inputs.record_clicks > state.seen_record
+    stop = inputs.stop_clicks > state.seen_stop
+    pressed = state.gamepad_pressed.copy()
+    if inputs.gamepad_axes is not None and len(inputs.gamepad_axes) >= 4:
+        axes = np.asarray(inputs.gamepad_axes, dtype=float)[:4]
+        axes = np.where(np.abs(axes) < config.gamepad_deadband, 0.0, axes)
+        buttons = np.zeros(8)
+        if inputs.gamepad_buttons is not None:
+            b = np.asarray(inputs.gamepad_buttons, dtype=float)[:8]
+            buttons[:b.size] = b
+        v = np.zeros(7)
+        # Stick up is negative in the browser's Gamepad API.
+        v[0] = -axes[1] * config.gamepad_speed
+        v[1] = -axes[0] * config.gamepad_speed
+        v[2] = -axes[3] * config.gamepad_speed
+        v[5] = -axes[2] * config.gamepad_angular_speed_deg
+        v[6] = (buttons[GAMEPAD_RT] - buttons[GAMEPAD_LT]) * config.gamepad_gripper_speed
+        if np.any(v != 0):
+            target = np.clip(target + v * dt, lower, upper)
+            moved = True
+        now = buttons[[GAMEPAD_RECORD, GAMEPAD_STOP]] > 0.5
+        record |= bool(now[0] and not pressed[0])
+        stop |= bool(now[1] and not pressed[1])
+        pressed = now.astype(float)
+    mode = state.mode
+    if record and mode == IDLE:
+        mode = RECORDING
+    elif stop and mode == RECORDING:
+        mode = DONE
+    new = TeleopState(target, mode, max(state.seen_record, int(inputs.record_clicks)),
+                      max(state.seen_stop, int(inputs.stop_clicks)), pressed)
+    return new, moved
+
+
+def target_pose(target: np.ndarray, R_WE_home: RotationMatrix) -> RigidTransform:
+    """X_WE of a target (7,): world rotation roll-pitch-yaw [deg] applied to the home orientation."""
+    R = RollPitchYaw(np.deg2rad(target[3:6])).ToRotationMatrix() @ R_WE_home
+    return RigidTransform(R, target[:3])
+
+
+class MeshcatTeleop(LeafSystem):
+    """Reads Meshcat sliders, buttons and gamepad; outputs the hand command.
+
+    Output ports: ``X_WE_desired`` (RigidTransform, world), ``gripper_command``
+    [1] (m), ``mode`` [1] (0 idle, 1 recording, 2 done). The state (target,
+    mode, handled click counts) is the system's discrete state, updated every
+    ``config.period`` s; Meshcat is only read (and its sliders written back
+    when a gamepad moved the target).
+    """
+
+    def __init__(self, meshcat, X_WE_home: RigidTransform, config: TeleopConfig | None = None,
+                 gripper_home: float = 0.0):
+        super().__init__()
+        self._meshcat = meshcat
+        self._config = config or TeleopConfig()
+        self._R_home = X_WE_home.rotation()
+        self._lower, self._upper, self._step = slider_limits(X_WE_home, self._config)
+        self._home = np.r_[X_WE_home.translation(), 0.0, 0.0, 0.0, gripper_home]
+        initial = TeleopState(self._home.copy())
+        self._state = self.DeclareDiscreteState(initial.to_vector())
+        self.DeclarePeriodicDiscreteUpdateEvent(self._config.period, 0.0, self._update)
+        self.DeclareAbstractOutputPort("X_WE_desired", lambda: Value(RigidTransform()), self._calc_pose,
+                                       {self.xd_ticket()})
+        self.DeclareVectorOutputPort("gripper_command", 1, self._calc_gripper, {self.xd_ticket()})
+        self.DeclareVectorOutputPort("mode", 1, self._calc_mode, {self.xd_ticket()})
+        self.add_controls()
+
+    @property
+    def config(self) -> TeleopConfig:
+        return self._config
+
+    def add_controls(self) -> None:
+        """Adds (or resets) the sliders at the home pose and the buttons with zero clicks."""
+        m = self._meshcat
+        existing = set(m.GetSliderNames())
+        for i, (name, dec, inc) in enumerate(SLIDERS):
+            if name in existing:
+                m.SetSliderValue(name, self._home[i])
+            else:
+                m.AddSlider(name, self._lower[i], self._upper[i], self._step[i], self._home[i], dec, inc)
+        m.AddButton(RECORD_BUTTON, RECORD_KEY)   # re-adding resets the click count to zero
+        m.AddButton(STOP_BUTTON, STOP_KEY)
+
+    def read_inputs(self) -> TeleopInputs:
+        m = self._meshcat
+        sliders = np.array([m.GetSliderValue(name) for name, _, _ in SLIDERS])
+        gamepad = m.GetGamepad()
+        axes = buttons = None
+        if gamepad.index is not None:
+            axes, buttons = np.asarray(gamepad.axes, float), np.asarray(gamepad.button_values, float)
+        return TeleopInputs(sliders, m.GetButtonClicks(RECORD_BUTTON), m.GetButtonClicks(STOP_BUTTON),
+                            axes, buttons)
+
+    def state(self, context) -> TeleopState:
+        return TeleopState.from_vector(context.get_discrete_state(self._state).value())
+
+    def _update(self, context, discrete_state):
+        state, moved = teleop_step(self.state(context), self.read_inputs(), self._config.period,
+                                   self._config, self._lower, self._upper)
+        if moved:
+            for i, (name, _, _) in enumerate(SLIDERS):
+                self._meshcat.SetSliderValue(name, state.target[i])
+        discrete_state.set_value(self._state, state.to_vector())
+
+    def _calc_pose(self, context, output):
+        output.set_value(target_pose(self.state(context).target, self._R_home))
+
+    def _calc_gripper(self, context, output: BasicVector):
+        output.SetAtIndex(0, self.state(context).target[6])
+
+    def _calc_mode(self, context, output: BasicVector):
+        output.SetAtIndex(0, float(self.state(context).mode))
+
+
+class TeleopSession:
+    """The station driven by :class:`MeshcatTeleop`, one diagram and simulator.
+
+    meshcat: a ``pydrake.geometry.Meshcat`` (``StartMeshcat()``); the station
+    is drawn there and the controls are added to its page.
+    """
+
+    def __init__(self, skill: str, meshcat, config: TeleopConfig | None = None, station_config=None):
+        from drake_skill.station.builder import build_station
+        from drake_skill.station.config import SKILLS, scenario_for_skill
+
+        if skill not in SKILLS:
+            raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
+        self.skill = skill
+        self.config = config or TeleopConfig()
+        station_config = station_config or scenario_for_skill(skill)
+        if not self.config.record_perception:
+            station_config.enable_camera = False
+        self.meshcat = meshcat
+        builder = DiagramBuilder()
+        self.station = builder.AddNamedSystem("station", build_station(station_config, meshcat))
+        home_context = self.station.CreateDefaultContext()
+        X_WE_home = self.station.GetOutputPort("ee_pose").Eval(home_context)
+        self.teleop = builder.AddNamedSystem("teleop", MeshcatTeleop(
+            meshcat, X_WE_home, self.config, self.station.config.gripper_home))
+        builder.Connect(self.teleop.GetOutputPort("X_WE_desired"), self.station.GetInputPort("ee_pose_desired"))
+        builder.Connect(self.teleop.GetOutputPort("gripper_command"), self.station.GetInputPort("gripper_command"))
+        self.diagram = builder.Build()
+        self.context = self.diagram.CreateDefaultContext()
+        self.simulator = Simulator(self.diagram, self.context)
+        self.X_WO = None
+
+    def reset(self, seed: int | None) -> RigidTransform:
+        """Defaults, object pose from ``seed``, controls back at home; returns X_WO."""
+        self.diagram.SetDefaultContext(self.context)
+        self.context.SetTime(0.0)
+        self.X_WO = self.station.reset(self.context, seed)
+        self.teleop.add_controls()
+        self.simulator.Initialize()
+        self.simulator.AdvanceTo(0.0)
+        return self.X_WO
+
+    def mode(self) -> int:
+        return self.teleop.state(self.teleop.GetMyContextFromRoot(self.context)).mode
+
+    def record(self, seed: int, user: Callable[[float], None] | None = None, status=print):
+        """Waits for Record, records until Stop, returns the Demonstration.
+
+        ``user(t)`` is called before every simulation step with the current
+        time (tests drive the sliders and buttons from it). The recording
+        lasts at least 1 s (10 samples at 10 Hz) and ends on a camera frame.
+        Raises TimeoutError if Record is not pressed within ``max_wait``.
+        """
+        from drake_skill.demos.format import MIN_SAMPLES
+        from drake_skill.demos.demonstrator import StationRecorder, make_perception
+
+        config = self.config
+        X_WO = self.reset(seed)
+        self.simulator.set_target_realtime_rate(config.realtime_rate)
+        status(f"[{self.skill}, seed {seed}] drive the hand to the start, then press "
+               f"{RECORD_BUTTON}; {STOP_BUTTON} ends the demonstration")
+        while self.mode() == IDLE:
+            t = self.context.get_time()
+            if t > config.max_wait:
+                raise TimeoutError(f"{RECORD_BUTTON} was not pressed within {config.max_wait} s")
+            if user is not None:
+                user(t)
+            self.simulator.AdvanceTo(t + config.period)
+        perception = make_perception(self.station) if config.record_perception else None
+        recorder = StationRecorder(self.station, self.context, self.simulator, 100.0, 10.0,
+                                   perception)
+        t_start = recorder.anchor()
+        status(f"recording from t = {t_start:.2f} s")
+        gripper = self.teleop.GetOutputPort("gripper_command")
+        teleop_context = self.teleop.GetMyContextFromRoot(self.context)
+        min_raw = (MIN_SAMPLES - 1) * recorder.k + 1
+        while True:
+            if user is not None:
+                user(recorder.next_time())
+            recorder.sample(float(gripper.Eval(teleop_context)[0]))
+            done = self.mode() == DONE or recorder.next_time() - t_start > config.max_duration
+            if done and recorder.at_frame and recorder.n_samples >= min_raw:
+                break
+        success = judge_success(self.skill, recorder.obj[-1], self.station.config.success)
+        metadata = {"source": "interactive", "teleop_config": dc.asdict(config),
+                    "recording_started_at_s": t_start,
+                    "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
+        demo = recorder.demonstration(self.skill, seed, X_WO, success, metadata)
+        status(f"recorded {demo.duration:.1f} s: {'success' if success else 'FAILURE'} "
+               f"(final object state {demo.final_object_state:.3f})")
+        return demo
+
+
+def record_interactive(skill: str, count: int, seed: int = 0, config: TeleopConfig | None = None,
+                       meshcat=None, status=print) -> list:
+    """Records ``count`` successful interactive demonstrations (a failed one is repeated
+    on the next seed). Starts Meshcat if none is given and prints its URL."""
+    if meshcat is None:
+        from pydrake.geometry import StartMeshcat
+        meshcat = StartMeshcat()
+    status(f"Meshcat: {meshcat.web_url()}  (open it in a browser; keys act when the page has focus)")
+    status("keys: W/S x, A/D y, E/Q z, L/J roll, I/K pitch, O/U yaw, X/Z gripper; "
+           "R record, T stop")
+    session = TeleopSession(skill, meshcat, config)
+    demos = []
+    while len(demos) < count:
+        demo = session.record(seed, status=status)
+        seed += 1
+        if demo.success:
+            demos.append(demo)
+        else:
+            status("not a success by the ground-truth judge; once more, on the next object pose")
+    return demos

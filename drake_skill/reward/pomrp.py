@@ -1,0 +1,225 @@
+"""Learned rewards: the goal HMM as a POMRP (docs/method.md section 4, thesis ch. 4).
+
+For an execution's goal data ``G = g_1..g_T`` (``G: (T, d)``, 10 Hz frames):
+
+* dense per-step reward, Eq. 4.4: ``h(G, t) = sum_s v(s) P(s_t = s | G)``
+  with the smoothed (forward-backward) posterior;
+* return, Eq. 4.5: ``R(G) = sum_t h(G, t)``, the black-box objective;
+* the reward available online at ``t`` (for per-step methods, PI^2 and
+  PI^2-Cov): ``sum_s v(s) P(s_t = s | g_1..g_t)`` from the filtered posterior,
+  and a one-frame log-space filter update for streaming use;
+* sparse verdict: success iff the final state of the Viterbi path is
+  terminal (the authors' rule); optionally also the per-frame log-likelihood
+  ``log P(G) / T`` must lie within the demonstrations' range widened by a
+  margin (:class:`VerdictConfig`).
+
+Values ``v`` come from :mod:`drake_skill.reward.mrp`; rewards are unitless
+(value per frame), returns are sums over frames.
+"""
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.special import logsumexp
+
+from drake_skill.reward.goal_model import GoalHMM, GoalModelConfig, forward_backward, gaussian_log_density, viterbi
+from drake_skill.reward.mrp import MrpConfig, monte_carlo_values
+
+__all__ = ["VerdictConfig", "PomrpConfig", "Pomrp", "fit_pomrp"]
+
+
+@dataclass
+class VerdictConfig:
+    """The goal model's success rule (docs/method.md section 4, "Sparse reward").
+
+    Attributes:
+      require_likelihood: also require ``log P(G) / T`` (nats per frame) to be
+        within ``[min - margin, max + margin]`` of the demonstrations' values
+        recorded at fit time.  Off by default (the authors' rule only).
+      loglik_margin: the margin in nats per frame.
+    """
+
+    require_likelihood: bool = False
+    loglik_margin: float = 2.0
+
+
+@dataclass
+class PomrpConfig:
+    """Everything :func:`fit_pomrp` needs (loadable with ``yaml_load_typed``)."""
+
+    goal_model: GoalModelConfig = field(default_factory=GoalModelConfig)
+    mrp: MrpConfig = field(default_factory=MrpConfig)
+    verdict: VerdictConfig = field(default_factory=VerdictConfig)
+
+
+class Pomrp:
+    """The goal HMM plus MRP state values: dense rewards, returns and the verdict.
+
+    Args:
+      goal_model: a fitted :class:`GoalHMM` (``k`` states, ``d`` features).
+      values: ``v (k,)`` state values (:func:`drake_skill.reward.mrp.monte_carlo_values`).
+      verdict: :class:`VerdictConfig`.
+      info: JSON-able provenance saved with the model (``fit_pomrp`` records
+        the MRP settings and horizon ``L`` there).
+    """
+
+    def __init__(self, goal_model: GoalHMM, values, verdict: VerdictConfig | None = None,
+                 info: dict[str, Any] | None = None):
+        goal_model._check_fitted()
+        v = np.asarray(values, dtype=float)
+        k = goal_model.n_states_
+        if v.shape != (k,) or not np.all(np.isfinite(v)):
+            raise ValueError(f"values: expected {k} finite state values, got shape {v.shape}: {v}")
+        self.goal_model = goal_model
+        self.values = v
+        self.verdict_config = verdict if verdict is not None else VerdictConfig()
+        self.info = dict(info or {})  # JSON-able provenance, e.g. the MRP settings
+        if not self.verdict_config.loglik_margin >= 0:
+            raise ValueError(f"verdict.loglik_margin: expected >= 0, got {self.verdict_config.loglik_margin}")
+        # Parameters cached once: the reward path must stay well under 1 ms.
+        self._startprob = goal_model.startprob_
+        self._transmat = goal_model.transmat_
+        with np.errstate(divide="ignore"):
+            self._log_startprob = np.log(goal_model.startprob_)
+            self._log_transmat = np.log(goal_model.transmat_)
+
+    # --------------------------------------------------------------- basics
+    @property
+    def n_states(self) -> int:
+        return self.goal_model.n_states_
+
+    @property
+    def n_features(self) -> int:
+        return self.goal_model.n_features_in_
+
+    @property
+    def terminal_states(self) -> np.ndarray:
+        return self.goal_model.terminal_states_
+
+    @property
+    def loglik_range(self) -> tuple[float, float]:
+        """Accepted ``log P(G) / T`` (nats per frame): demonstrations' min/max -/+ margin."""
+        ll = self.goal_model.loglik_per_step_
+        m = float(self.verdict_config.loglik_margin)
+        return float(ll.min()) - m, float(ll.max()) + m
+
+    def _log_b(self, G) -> np.ndarray:
+        return self.goal_model.log_emission(G)
+
+    # -------------------------------------------------------------- rewards
+    def posteriors(self, G):
+        """``(filtered (T, k), smoothed (T, k), log P(G))`` for ``G: (T, d)``."""
+        return forward_backward(self._log_b(G), self._startprob, self._transmat)
+
+    def reward_and_return(self, G) -> tuple[np.ndarray, float]:
+        """Dense rewards ``h (T,)`` (Eq. 4.4) and return ``R`` (Eq. 4.5) of one execution."""
+        _, smoothed, _ = forward_backward(self._log_b(G), self._startprob, self._transmat)
+        h = smoothed @ self.values
+        return h, float(h.sum())
+
+    def rewards(self, G) -> np.ndarray:
+        """Eq. 4.4: ``h(G, t) = sum_s v(s) P(s_t = s | G)``, ``(T,)``."""
+        return self.reward_and_return(G)[0]
+
+    def episode_return(self, G) -> float:
+        """Eq. 4.5: ``R(G) = sum_t h(G, t)``."""
+        return self.reward_and_return(G)[1]
+
+    def filtered_rewards(self, G) -> np.ndarray:
+        """Reward available online at each ``t``: ``sum_s v(s) P(s_t = s | g_1..g_t)``, ``(T,)``."""
+        filtered, _, _ = forward_backward(self._log_b(G), self._startprob, self._transmat, smooth=False)
+        return filtered @ self.values
+
+    # ------------------------------------------------------------ streaming
+    def log_emission_frame(self, g) -> np.ndarray:
+        """``log z_i(g)`` of one frame ``g: (d,)`` -> ``(k,)``."""
+        g = np.asarray(g, dtype=float)
+        if g.shape != (self.n_features,):
+            raise ValueError(f"g: expected one frame of shape ({self.n_features},), got {g.shape}")
+        if not np.all(np.isfinite(g)):
+            raise ValueError(f"g: non-finite goal data {g}")
+        gm = self.goal_model
+        return gaussian_log_density(g[None, :], gm.means_, gm._prec_chol, gm._log_norm)[0]
+
+    def filter_update(self, log_belief, g, first: bool):
+        """One step of the forward filter in log space (Eq. 3.10, normalised).
+
+        Args:
+          log_belief: ``(k,)`` ``log P(s_{t-1} | g_1..g_{t-1})`` (ignored if ``first``).
+          g: ``(d,)`` the new frame ``g_t``.
+          first: ``g`` is the first frame (use ``pi`` instead of ``P``).
+
+        Returns ``(log P(s_t | g_1..g_t) (k,), log P(g_t | g_1..g_{t-1}), reward_t)``;
+        the second summed over ``t`` is ``log P(G)``, the third is the
+        filtered reward ``v . P(s_t | g_1..g_t)``.
+        """
+        log_b = self.log_emission_frame(g)
+        if first:
+            la = self._log_startprob + log_b
+        else:
+            lb = np.asarray(log_belief, dtype=float)
+            la = logsumexp(lb[:, None] + self._log_transmat, axis=0) + log_b
+        c = float(logsumexp(la))
+        la = la - c
+        return la, c, float(np.exp(la) @ self.values)
+
+    # -------------------------------------------------------------- verdict
+    def verdict_details(self, G) -> dict[str, Any]:
+        """The success rule's ingredients for ``G: (T, d)``.
+
+        Keys: ``final_state`` (Viterbi), ``terminal`` (final state in ``T``),
+        ``loglik_per_step`` (nats per frame), ``loglik_in_range``, ``success``.
+        """
+        log_b = self._log_b(G)
+        path, _ = viterbi(log_b, self._startprob, self._transmat)
+        _, _, ll = forward_backward(log_b, self._startprob, self._transmat, smooth=False)
+        per_step = ll / len(log_b)
+        lo, hi = self.loglik_range
+        terminal = bool(np.isin(path[-1], self.terminal_states))
+        in_range = bool(lo <= per_step <= hi)
+        success = terminal and (in_range or not self.verdict_config.require_likelihood)
+        return {"final_state": int(path[-1]), "terminal": terminal, "loglik_per_step": float(per_step),
+                "loglik_in_range": in_range, "success": bool(success)}
+
+    def verdict(self, G) -> bool:
+        """Sparse success: Viterbi final state is terminal (and, if configured, likelihood in range)."""
+        return self.verdict_details(G)["success"]
+
+    # ------------------------------------------------------------ save/load
+    def to_arrays(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """``(arrays, metadata)`` for npz + JSON; goal-model arrays are prefixed ``hmm_``."""
+        arrays, meta = self.goal_model.to_arrays()
+        out = {f"hmm_{k}": v for k, v in arrays.items()}
+        out["values"] = self.values.copy()
+        return out, {"hmm": meta, "info": self.info, "verdict": {
+            "require_likelihood": bool(self.verdict_config.require_likelihood),
+            "loglik_margin": float(self.verdict_config.loglik_margin)}}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict[str, np.ndarray], metadata: dict[str, Any]) -> "Pomrp":
+        if "values" not in arrays:
+            raise ValueError("arrays: missing 'values'")
+        hmm = GoalHMM.from_arrays({k[4:]: v for k, v in arrays.items() if k.startswith("hmm_")},
+                                  metadata.get("hmm", {}))
+        return cls(hmm, arrays["values"], VerdictConfig(**metadata.get("verdict", {})),
+                   metadata.get("info", {}))
+
+
+def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
+    """Fits the goal model on the demonstrations and values its states (thesis ch. 4, 6.5).
+
+    ``X: (N, d)`` all demonstrations' goal data stacked, ``lengths`` their
+    frame counts.  ``L = floor(mean demonstration length)`` unless
+    ``config.mrp.length`` is set.
+    """
+    config = config if config is not None else PomrpConfig()
+    hmm = GoalHMM.from_config(config.goal_model).fit(X, lengths)
+    mc = config.mrp
+    L = int(mc.length) if mc.length > 0 else int(np.floor(hmm.lengths_.mean()))
+    v = monte_carlo_values(hmm.startprob_, hmm.transmat_, hmm.terminal_states_, L,
+                           n_sequences=mc.n_sequences, gamma=mc.gamma,
+                           terminal_scale=mc.terminal_scale, random_state=mc.random_state)
+    info = {"mrp": dataclasses.asdict(mc), "mrp_length": L}
+    return Pomrp(hmm, v, config.verdict, info)

@@ -1,0 +1,58 @@
+"""The package layout's rules: every box's math imports without Drake."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "drake_skill"
+#: Boxes whose modules are Drake-free math, except the Drake side named below.
+MATH_BOXES = ("action", "perception", "reward", "learning")
+#: The Drake side of a box: ``systems`` (its LeafSystems and diagram wiring);
+#: in ``learning``, the rollout runner and its workers, which simulate the diagram.
+DRAKE_SIDE = ("systems", "rollout", "workers")
+#: Drake-free modules outside the boxes.
+MATH_MODULES = ("drake_skill.common", "drake_skill.fileio")
+
+# Makes ``import pydrake`` (and any submodule) fail, then imports the module.
+_PROBE = """
+import importlib, sys
+class _NoDrake:
+    def find_spec(self, name, path=None, target=None):
+        if name == "pydrake" or name.startswith("pydrake."):
+            raise ImportError(f"pydrake is made unimportable for this test ({name})")
+        return None
+sys.meta_path.insert(0, _NoDrake())
+importlib.import_module(sys.argv[1])
+assert not any(m == "pydrake" or m.startswith("pydrake.") for m in sys.modules), "pydrake got imported"
+"""
+
+
+def math_modules() -> list[str]:
+    names = list(MATH_MODULES)
+    for box in MATH_BOXES:
+        names.append(f"drake_skill.{box}")
+        for path in sorted((PACKAGE / box).glob("*.py")):
+            if path.stem not in ("__init__",) + DRAKE_SIDE:
+                names.append(f"drake_skill.{box}.{path.stem}")
+    return names
+
+
+def test_every_box_has_the_same_convention():
+    for box in MATH_BOXES:
+        assert (PACKAGE / box / "__init__.py").exists(), box
+    for box in ("action", "perception", "reward"):
+        assert (PACKAGE / box / "systems.py").exists(), f"{box}/systems.py holds the box's LeafSystems"
+
+
+def test_the_probe_really_blocks_pydrake():
+    result = subprocess.run([sys.executable, "-c", _PROBE, "drake_skill.action.systems"],
+                            capture_output=True, text=True)
+    assert result.returncode != 0 and "unimportable" in result.stderr
+
+
+@pytest.mark.parametrize("module", math_modules())
+def test_math_module_imports_without_pydrake(module):
+    result = subprocess.run([sys.executable, "-c", _PROBE, module], capture_output=True, text=True)
+    assert result.returncode == 0, f"{module} needs pydrake:\n{result.stderr[-2000:]}"
