@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from drake_skill.perception import pcae, shapes
+from drake_skill.perception.segmentation import resample_points
 
 
 def test_generate_clouds_is_seeded_and_sliceable():
@@ -107,14 +108,14 @@ def test_grazing_angle_returns_are_missing():
 def test_resample_points():
     rng = np.random.default_rng(0)
     few = rng.normal(size=(100, 3))
-    out = pcae.resample_points(few, 2048, rng)
+    out = resample_points(few, 2048, rng)
     assert out.shape == (2048, 3)
     assert len(np.unique(out, axis=0)) == 100  # all originals kept, the rest repeats
     many = rng.normal(size=(5000, 3))
-    out = pcae.resample_points(many, 2048, rng)
+    out = resample_points(many, 2048, rng)
     assert len(np.unique(out, axis=0)) == 2048  # without replacement
     with pytest.raises(ValueError, match=r"empty cloud"):
-        pcae.resample_points(np.zeros((0, 3)), 2048, rng)
+        resample_points(np.zeros((0, 3)), 2048, rng)
 
 
 def test_errors():

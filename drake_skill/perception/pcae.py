@@ -103,26 +103,6 @@ def normalize_points(points, scale_m: float = NORMALIZATION_SCALE_M):
     return (points - 0.5 * (lo + hi)) / scale_m
 
 
-def resample_points(points: np.ndarray, n_points: int, rng: np.random.Generator) -> np.ndarray:
-    """Resamples a cloud (M, 3) to exactly ``n_points`` rows.
-
-    Without replacement when M >= n_points, otherwise all M points plus
-    ``n_points - M`` drawn with replacement. Raises ValueError when M == 0.
-    """
-    points = np.asarray(points)
-    m = points.shape[0]
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"points: expected shape (M, 3), got {points.shape}")
-    if m == 0:
-        raise ValueError("points: cannot resample an empty cloud (shape (0, 3))")
-    if m >= n_points:
-        idx = rng.choice(m, size=n_points, replace=False)
-    else:
-        idx = np.concatenate([np.arange(m), rng.choice(m, size=n_points - m, replace=True)])
-        rng.shuffle(idx)
-    return points[idx]
-
-
 # --------------------------------------------------------------------------- model
 
 

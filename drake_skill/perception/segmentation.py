@@ -59,6 +59,8 @@ import math
 import numpy as np
 from scipy import ndimage
 
+from drake_skill.common import N_POINTS
+
 __all__ = [
     "BOUNDING_BOX_SIZE",
     "ObjectBox",
@@ -76,8 +78,6 @@ __all__ = [
     "target_colour_mask",
 ]
 
-N_POINTS = 2048
-"""Points per object cloud (docs/method.md section 3, thesis 6.4)."""
 
 BOUNDING_BOX_SIZE = 7
 """``[cx, cy, cz, ex, ey, ez, yaw]``: see :class:`ObjectBox`."""
@@ -509,17 +509,22 @@ def estimate_box(points, plane, config: SegmentationConfig) -> ObjectBox:
 # --------------------------------------------------------------------------- resampling
 
 
-def resample_points(points, n_points: int = N_POINTS, seed: int = 0) -> np.ndarray:
+def resample_points(points, n_points: int = N_POINTS, seed: "int | np.random.Generator" = 0) -> np.ndarray:
     """Exactly ``n_points`` rows drawn uniformly from ``points`` (M, 3); deterministic for a seed.
 
-    M >= n_points: a random subset without replacement; M < n_points: all M
-    points and ``n_points - M`` more drawn with replacement, shuffled.
+    The one resampler of the project (segmented frames and the PCAE's training
+    views). M >= n_points: a random subset without replacement; M < n_points:
+    all M points and ``n_points - M`` more drawn with replacement, shuffled.
+    ``seed``: an int, or a ``numpy.random.Generator`` to draw from (advanced).
     Raises ValueError for an empty or non-finite cloud. Returns (n_points, 3) float64.
     """
+    if np.ndim(points) == 2 and np.shape(points)[0] == 0:
+        raise ValueError("points: cannot resample an empty cloud (shape (0, 3)); "
+                         "check the segmentation found the object")
     points = _check_points(points, "points", min_rows=1)
     if int(n_points) != n_points or n_points < 1:
         raise ValueError(f"n_points: expected a positive integer, got {n_points!r}")
-    rng = np.random.default_rng(seed)
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
     m = points.shape[0]
     if m >= n_points:
         idx = rng.choice(m, size=int(n_points), replace=False)

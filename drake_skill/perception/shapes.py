@@ -23,7 +23,7 @@ at z = 0, object resting on it near the origin):
    disparity quantisation (1/8 px steps, baseline 7.5 cm). Points are returned
    in W.
 4. Optionally, points near the table (z below a few mm, as a table-plane
-   removal would cut them) are dropped, and :func:`drake_skill.perception.pcae.resample_points`
+   removal would cut them) are dropped, and :func:`drake_skill.perception.segmentation.resample_points`
    brings the cloud to exactly 2048 points (with replacement if fewer).
 
 :func:`generate_clouds` is seeded per sample (``np.random.default_rng([seed, i])``),
@@ -37,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from drake_skill.common import N_POINTS, look_at
-from drake_skill.perception.pcae import resample_points
+from drake_skill.perception.segmentation import resample_points
 
 SHAPE_KINDS = (
     "box",
