@@ -31,12 +31,19 @@ Equations (one controlled dimension; all dimensions share the phase):
   the forcing term twice (in the regression and in the normalised mixture);
   on a 0.3 m minimum-jerk demonstration with B = 20 the position RMSE is
   2.3 mm with 1, 0.7 mm with 4, 0.55 mm with 8 (B = 10: 7.1, 2.4, 2.1 mm);
-- amplitude ``a = g - y0`` (the standard scaling). It makes the forcing term
-  vanish in a dimension where start and goal coincide, which degenerates the
-  fit (w = f / 0). Here ``|a|`` is floored at ``DmpConfig.amplitude_floor``
-  keeping its sign (sign(0) = +1), so weights stay finite and the motion
-  shape is still reproduced; ``scale_by_amplitude=False`` drops the scaling
-  altogether (a = 1), as movement_primitives and others do;
+- amplitude ``a``. Default (``scale_by_amplitude=False``): ``a = 1``, no
+  amplitude scaling, as movement_primitives and others do. The forcing term
+  then does not depend on the start, so the motion is continuous in ``y0``:
+  moving the start by ``dy0`` changes the trajectory by
+  ``dy0 (1 - K s(t))``, at most ``|dy0|`` (docs/method.md section 2, "Amplitude").
+  Option ``scale_by_amplitude=True`` is the thesis's form (Eq. 3.4),
+  ``a = g - y0`` per dimension, with ``|a|`` floored at
+  ``DmpConfig.amplitude_floor`` keeping its sign (sign(0) = +1) so the fit
+  stays finite where start and goal coincide (w = f / 0 otherwise). That form
+  is discontinuous where ``g - y0`` changes sign: a 10 cm lift that returns
+  to its height becomes a 10 cm dip when the start moves 5 mm up (the sign
+  of ``a`` flips); in a rollout the start comes from the measured hand pose
+  in the perceived object frame, so perception noise alone can flip it;
 - fitting from one demonstration (thesis Eq. 3.7-3.9)::
 
       f_target(t) = tau^2 ddy - K (g - y) + D tau dy
@@ -124,6 +131,11 @@ __all__ = [
 
 #: Width of a pose: xyz (m) + quaternion (w, x, y, z).
 POSE_DIM = 7
+#: Longest DMP duration tau accepted, s (an hour; the skills last seconds).
+MAX_DURATION_S = 3600.0
+#: Most internal integration steps one call may allocate (2e6: 2000 s at the
+#: default 1 ms step; the cached operators take steps * B * 8 bytes).
+MAX_INTEGRATION_STEPS = 2_000_000
 _QUATERNION_MODES = ("vector", "ude")
 _REGRESSIONS = ("lwr", "least_squares")
 
@@ -151,9 +163,11 @@ class DmpConfig:
     quaternion: str = "vector"
     #: Weight regression: "lwr" (docs/method.md, thesis Eq. 3.9) or "least_squares".
     regression: str = "lwr"
-    #: Scale the forcing term by the amplitude a = g - y0 (standard DMP).
-    scale_by_amplitude: bool = True
-    #: Floor on |a| per dimension (m for xyz, unitless for quaternion/rad).
+    #: Scale the forcing term by the amplitude a = g - y0 (thesis Eq. 3.4). Off by
+    #: default: that form flips the motion where g - y0 changes sign (module docstring).
+    scale_by_amplitude: bool = False
+    #: Floor on |a| per dimension (m for xyz, unitless for quaternion/rad); only
+    #: used with ``scale_by_amplitude``.
     amplitude_floor: float = 1e-2
 
     def validate(self) -> "DmpConfig":
@@ -208,6 +222,14 @@ class Dmp:
             raise ValueError(f"Dmp.weights: contains NaN or inf (shape {self.weights.shape})")
         if not (math.isfinite(self.tau) and self.tau > 0):
             raise ValueError(f"Dmp.tau: expected a finite duration > 0 s, got {self.tau!r}")
+        if self.tau > MAX_DURATION_S:
+            raise ValueError(f"Dmp.tau: {self.tau!r} s is longer than the {MAX_DURATION_S:.0f} s accepted; "
+                             "expected the duration of one skill execution in seconds")
+        for name in ("y0", "goal"):
+            norm = float(np.linalg.norm(getattr(self, name)[3:]))
+            if abs(norm - 1.0) > UNIT_NORM_TOLERANCE:
+                raise ValueError(f"Dmp.{name}: quaternion {getattr(self, name)[3:]} has norm {norm:.6g}; "
+                                 f"expected a unit quaternion (w, x, y, z) within {UNIT_NORM_TOLERANCE}")
 
     @property
     def n_basis(self) -> int:
@@ -355,6 +377,9 @@ def forcing_amplitude(y0, goal, config: DmpConfig) -> np.ndarray:
 
 def _regress(t: np.ndarray, f_target: np.ndarray, a: np.ndarray, tau: float, config: DmpConfig) -> np.ndarray:
     """Weights (B, n) such that ``phi(x_t) @ (W * a) ~= f_target`` (T, n)."""
+    if config.n_basis > t.shape[0]:
+        raise ValueError(f"DmpConfig.n_basis: {config.n_basis} bases but the demonstration has only "
+                         f"{t.shape[0]} samples; use at most {t.shape[0]} bases or a longer demonstration")
     c, h = basis_centres_widths(config.n_basis, config.alpha_x, config.width_scale)
     x = phase(t, tau, config.alpha_x)
     if config.regression == "lwr":
@@ -544,6 +569,15 @@ def exploration_covariance(dmps_or_weights, ridge: float = 0.1, floor: float = 1
 # --------------------------------------------------------------------------
 
 
+def _check_steps(t_max: float, dt: float) -> None:
+    """Raises ValueError when integrating to ``t_max`` s at step ``dt`` would exceed MAX_INTEGRATION_STEPS."""
+    steps = t_max / dt
+    if steps > MAX_INTEGRATION_STEPS:
+        raise ValueError(
+            f"times: integrating to {t_max:.6g} s at DmpConfig.dt = {dt:g} s takes {steps:.3g} steps, more than "
+            f"the {MAX_INTEGRATION_STEPS:.0e} allowed; shorten tau / the requested times or raise DmpConfig.dt")
+
+
 def default_times(tau: float, dt: float) -> np.ndarray:
     """Uniform times ``0, dt, ..., ceil(tau/dt) dt`` (s) covering [0, tau]."""
     n = int(math.ceil(tau / dt - 1e-9))
@@ -679,7 +713,11 @@ def integrate(
     w = _check_weights(dmp.weights if weights is None else weights, dmp.n_basis, d)
     if dmp.weights.shape[1] != d:
         raise ValueError(f"dmp.weights: has {dmp.weights.shape[1]} columns but config.quaternion={config.quaternion!r} needs {d}")
-    t = default_times(dmp.tau, config.dt) if times is None else _validate_times(times)
+    t_max = dmp.tau if times is None else None
+    t = _validate_times(times) if times is not None else None
+    _check_steps(t_max if t is None else float(t[-1]), config.dt)
+    if t is None:
+        t = default_times(dmp.tau, config.dt)
     h, n, idx, frac = _grid_for(t, config.dt)
     g_op, s_op = _operators(
         dmp.n_basis, float(config.alpha_x), float(config.width_scale), float(config.K), float(config.D), dmp.tau, h, n)
@@ -692,7 +730,11 @@ def integrate(
         y += dmp.y0 + config.K * s_rows[:, None] * (dmp.goal - dmp.y0)
         if normalize_quaternion:
             q = y[..., 3:]
-            q /= np.sqrt(np.einsum("...i,...i->...", q, q))[..., None]
+            norm = np.sqrt(np.einsum("...i,...i->...", q, q))
+            if not np.all(norm > 1e-9):
+                raise ValueError("weights: the integrated quaternion passes through zero norm (no "
+                                 "orientation); these weights drive the 4-D quaternion through the origin")
+            q /= norm[..., None]
         return y
     pos = _apply(g_rows, w[..., :3] * a[:3])
     pos += dmp.y0[:3] + config.K * s_rows[:, None] * (dmp.goal[:3] - dmp.y0[:3])

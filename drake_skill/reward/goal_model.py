@@ -35,9 +35,13 @@ not do safely with 2-3 short sequences:
 * BLAS limited to one thread during the fit (tiny matrices; thread hand-offs
   on a busy machine made hmmlearn's triangular solves several times slower).
 
-Inference (log emission densities, scaled forward-backward, Viterbi) is
-implemented here in vectorised numpy on the fitted parameters; see
-:func:`forward_backward` for why.
+Inference (log emission densities, log-space forward-backward, Viterbi) runs
+on the fitted parameters here; see :func:`forward_backward` for why.
+
+hmmlearn private API used (pin ``hmmlearn>=0.3,<0.4``): ``_covars_`` (the
+covariances as the M-step stores them, :func:`_full_covars`) and
+``hmmlearn._hmmc.forward_log`` / ``backward_log`` (compiled log-space
+recursions; a numpy fallback is used when they are absent).
 """
 
 import logging
@@ -47,6 +51,13 @@ from typing import Any
 import numpy as np
 from scipy.special import logsumexp
 from threadpoolctl import threadpool_limits
+
+try:  # hmmlearn's compiled log-space recursions (private module; see _lattices)
+    from hmmlearn import _hmmc
+    if not all(hasattr(_hmmc, name) for name in ("forward_log", "backward_log")):
+        _hmmc = None
+except ImportError:  # pragma: no cover - depends on the hmmlearn build
+    _hmmc = None
 
 __all__ = [
     "GoalModelConfig",
@@ -179,9 +190,9 @@ def gaussian_log_density(X: np.ndarray, means: np.ndarray, prec_chol: np.ndarray
 def forward_log(log_b: np.ndarray, log_startprob: np.ndarray, log_transmat: np.ndarray):
     """Log-space forward pass (Eq. 3.10), ``(log alpha (T, k), log P(G))``.
 
-    Exact even when every state's density underflows in probability space;
-    used as the fallback of :func:`forward_backward` and for Viterbi-like
-    robustness checks.  ``log alpha`` is unnormalised (joint with g_1..g_t).
+    The plain reference recursion with ``scipy.special.logsumexp`` (tests
+    compare :func:`forward_backward` against it).  ``log alpha`` is
+    unnormalised (joint with g_1..g_t).
     """
     T, k = log_b.shape
     la = np.empty((T, k))
@@ -199,6 +210,66 @@ def _backward_log(log_b: np.ndarray, log_transmat: np.ndarray) -> np.ndarray:
     return lb
 
 
+def _forward_log_np(log_b: np.ndarray, log_startprob: np.ndarray, log_transmat: np.ndarray) -> np.ndarray:
+    """Log-space forward lattice ``log alpha (T, k)`` in plain numpy (fallback of :func:`_lattices`).
+
+    Each step is ``log sum_i exp(log alpha_{t-1}(i) + log P_ij)`` with the
+    maximum over ``i`` factored out per column, so no entry underflows.
+    """
+    T, k = log_b.shape
+    la = np.empty((T, k))
+    la[0] = log_startprob + log_b[0]
+    for t in range(1, T):
+        M = la[t - 1][:, None] + log_transmat
+        m = M.max(axis=0)
+        finite = np.isfinite(m)
+        safe = np.where(finite, m, 0.0)
+        with np.errstate(divide="ignore"):
+            la[t] = np.where(finite, safe + np.log(np.exp(M - safe).sum(axis=0)), -np.inf) + log_b[t]
+    return la
+
+
+def _backward_log_np(log_b: np.ndarray, log_transmat: np.ndarray) -> np.ndarray:
+    T, k = log_b.shape
+    lb = np.zeros((T, k))
+    for t in range(T - 2, -1, -1):
+        M = log_transmat + (log_b[t + 1] + lb[t + 1])[None, :]
+        m = M.max(axis=1)
+        finite = np.isfinite(m)
+        safe = np.where(finite, m, 0.0)
+        with np.errstate(divide="ignore"):
+            lb[t] = np.where(finite, safe + np.log(np.exp(M - safe[:, None]).sum(axis=1)), -np.inf)
+    return lb
+
+
+def _lattices(log_b: np.ndarray, startprob: np.ndarray, transmat: np.ndarray, smooth: bool):
+    """``(log alpha (T, k), log beta (T, k) or None)``, exact in log space.
+
+    hmmlearn's compiled log-space recursions (``hmmlearn._hmmc``, a private
+    module of hmmlearn 0.3.x, hence the pin ``hmmlearn>=0.3,<0.4``) when
+    available, else the numpy versions above (same numbers, a few times slower).
+    """
+    log_b = np.ascontiguousarray(log_b, dtype=float)
+    pi = np.ascontiguousarray(startprob, dtype=float)
+    P = np.ascontiguousarray(transmat, dtype=float)
+    if _hmmc is not None:
+        with np.errstate(divide="ignore"):
+            _, la = _hmmc.forward_log(pi, P, log_b)
+            lb = _hmmc.backward_log(pi, P, log_b) if smooth else None
+        return la, lb
+    with np.errstate(divide="ignore"):
+        log_pi, log_P = np.log(pi), np.log(P)
+    return _forward_log_np(log_b, log_pi, log_P), (_backward_log_np(log_b, log_P) if smooth else None)
+
+
+def _normalise_rows(log_p: np.ndarray) -> np.ndarray:
+    """``exp(log_p)`` with every row scaled to sum to one (log-sum-exp per row)."""
+    m = log_p.max(axis=1, keepdims=True)
+    p = np.exp(log_p - m)
+    p /= p.sum(axis=1, keepdims=True)
+    return p
+
+
 def forward_backward(log_b: np.ndarray, startprob: np.ndarray, transmat: np.ndarray,
                      *, smooth: bool = True):
     """Filtered and smoothed state posteriors of one sequence (Eqs. 3.10-3.13).
@@ -211,59 +282,32 @@ def forward_backward(log_b: np.ndarray, startprob: np.ndarray, transmat: np.ndar
     Returns ``(filtered (T, k), smoothed (T, k) or None, log P(G))`` where
     ``filtered[t] = P(s_t | g_1..g_t)`` and ``smoothed[t] = P(s_t | G)``.
 
-    Hand-written rather than hmmlearn's ``predict_proba`` because (a) the
+    Both passes run in log space (Eqs. 3.10 and 3.12 with log-sum-exp), so
+    they stay exact when transitions are zero and emission log-densities
+    differ by hundreds or thousands of nats: a probability-space (Rabiner
+    scaled) recursion loses states whose probability underflows and can
+    overflow in the backward pass (docs/method.md section 4).  The filtered
+    posteriors equal those of the streaming filter
+    (:meth:`drake_skill.reward.pomrp.Pomrp.filter_update`).
+
+    Hand-written rather than hmmlearn's ``predict_proba`` because the
     per-step online reward needs the *filtered* posterior, which hmmlearn's
-    public API does not return, (b) one pass here gives filtered, smoothed
-    and ``log P(G)`` together, and (c) hmmlearn validates its input and
-    recomputes densities with per-state triangular solves on every call:
-    ~0.55 ms for 50 frames and 8 full-covariance states against ~0.25 ms
-    here, and far slower when the BLAS thread pool is contended.  This is the
-    scaled (Rabiner) recursion in probability space with each row of
-    densities divided by its maximum; if a step underflows (an execution far
-    from every state) it falls back to the exact log-space recursion.  The
-    tests check both paths against hmmlearn.
+    public API does not return, and one pass here gives filtered, smoothed
+    and ``log P(G)`` together without hmmlearn's per-call validation and
+    density recomputation.
     """
-    T, k = log_b.shape
-    row_max = log_b.max(axis=1, keepdims=True)
-    b = np.exp(log_b - row_max)
-    alpha = np.empty((T, k))
-    scale = np.empty(T)
-    a = startprob * b[0]
-    c = a.sum()
-    ok = c > 0.0
-    if ok:
-        alpha[0] = a / c
-        scale[0] = c
-        for t in range(1, T):
-            a = (alpha[t - 1] @ transmat) * b[t]
-            c = a.sum()
-            if not c > 0.0:
-                ok = False
-                break
-            alpha[t] = a / c
-            scale[t] = c
-    if ok:
-        log_lik = float(np.log(scale).sum() + row_max.sum())
-        if not smooth:
-            return alpha, None, log_lik
-        beta = np.empty((T, k))
-        beta[-1] = 1.0
-        for t in range(T - 2, -1, -1):
-            beta[t] = transmat @ (b[t + 1] * beta[t + 1]) / scale[t + 1]
-        gamma = alpha * beta
-        gamma /= gamma.sum(axis=1, keepdims=True)
-        return alpha, gamma, log_lik
-    # Underflow: exact log-space recursion.
-    with np.errstate(divide="ignore"):
-        log_pi, log_P = np.log(startprob), np.log(transmat)
-    la, log_lik = forward_log(log_b, log_pi, log_P)
-    filtered = np.exp(la - logsumexp(la, axis=1, keepdims=True))
+    log_b = np.asarray(log_b, dtype=float)
+    if log_b.ndim != 2 or log_b.shape[0] == 0:
+        raise ValueError(f"log_b: expected shape (T >= 1, k), got {log_b.shape}")
+    la, lb = _lattices(log_b, startprob, transmat, smooth)
+    log_lik = float(logsumexp(la[-1]))
+    if not np.isfinite(log_lik):
+        raise ValueError("forward_backward: the sequence has probability zero under the chain "
+                         "(no state sequence allowed by startprob/transmat explains it)")
+    filtered = _normalise_rows(la)
     if not smooth:
         return filtered, None, log_lik
-    lb = _backward_log(log_b, log_P)
-    lg = la + lb
-    smoothed = np.exp(lg - logsumexp(lg, axis=1, keepdims=True))
-    return filtered, smoothed, log_lik
+    return filtered, _normalise_rows(la + lb), log_lik
 
 
 def viterbi(log_b: np.ndarray, startprob: np.ndarray, transmat: np.ndarray):
@@ -714,6 +758,17 @@ class GoalHMM:
         G, _ = check_sequences(G, name="G", n_features=self.n_features_in_)
         return gaussian_log_density(G, self.means_, self._prec_chol, self._log_norm)
 
+    def frame_loglik(self, G=None, *, log_b=None) -> np.ndarray:
+        """``l_t = max_i log z_i(g_t)`` (nats), ``(T,)``: how well the best state explains each frame.
+
+        Pass ``G: (T, d)`` or precomputed ``log_b: (T, k)``.  This is the
+        per-frame quantity of the off-model guard (docs/method.md section 4,
+        "Observations the goal model cannot explain").
+        """
+        if log_b is None:
+            log_b = self.log_emission(G)
+        return np.asarray(log_b, dtype=float).max(axis=1)
+
     def filtered_posteriors(self, G) -> np.ndarray:
         """``P(s_t | g_1..g_t)``, ``(T, k)``, for one sequence ``G: (T, d)``."""
         return forward_backward(self.log_emission(G), self.startprob_, self.transmat_, smooth=False)[0]
@@ -773,24 +828,39 @@ class GoalHMM:
         return arrays, meta
 
     @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray], metadata: dict[str, Any]) -> "GoalHMM":
-        """Rebuilds a fitted model from :meth:`to_arrays` output."""
-        self = cls(**metadata.get("params", {}))
-        missing = [n.rstrip("_") for n in cls._ARRAYS if n.rstrip("_") not in arrays]
+    def from_arrays(cls, arrays: dict[str, np.ndarray], metadata: dict[str, Any],
+                    prefix: str = "") -> "GoalHMM":
+        """Rebuilds a fitted model from :meth:`to_arrays` output, validated as strictly as a fit.
+
+        Raises ValueError naming the array (with ``prefix``, e.g. the key in a
+        skill's ``arrays.npz``) when an array is missing, has the wrong shape,
+        is not finite, a probability vector or stochastic row does not sum to
+        one, a covariance is not symmetric positive definite, a terminal state
+        does not exist, or the metadata disagree with the arrays.
+        """
+        missing = [prefix + n.rstrip("_") for n in cls._ARRAYS if n.rstrip("_") not in arrays]
         if missing:
-            raise ValueError(f"arrays: missing {missing}")
+            raise ValueError(f"missing array(s) {missing}")
+        try:
+            self = cls(**metadata.get("params", {}))
+        except TypeError as e:
+            raise ValueError(f"goal-model metadata 'params': {e}") from e
         for name in cls._ARRAYS:
-            setattr(self, name, np.array(arrays[name.rstrip("_")]))
-        self.terminal_states_ = self.terminal_states_.astype(int)
-        self.lengths_ = self.lengths_.astype(int)
+            value = np.array(arrays[name.rstrip("_")])
+            if value.dtype.kind not in "fiub":
+                raise ValueError(f"{prefix}{name.rstrip('_')}: dtype {value.dtype}, expected numbers")
+            setattr(self, name, value.astype(float) if name not in ("terminal_states_", "lengths_") else value)
+        _validate_fitted_arrays(self, prefix)
         k, d = self.means_.shape
-        if (self.startprob_.shape != (k,) or self.transmat_.shape != (k, k)
-                or self.covars_.shape != (k, d, d)):
-            raise ValueError(
-                f"arrays: inconsistent shapes startprob {self.startprob_.shape}, transmat "
-                f"{self.transmat_.shape}, means {self.means_.shape}, covars {self.covars_.shape}")
+        for key, actual in (("n_states", k), ("n_features", d)):
+            if key in metadata and int(metadata[key]) != actual:
+                raise ValueError(f"goal-model metadata '{key}' = {metadata[key]} disagrees with "
+                                 f"{prefix}means of shape {self.means_.shape}")
         self.n_states_, self.n_features_in_ = k, d
         self.covariance_type_ = str(metadata.get("covariance_type", "full"))
+        if self.covariance_type_ not in COVARIANCE_TYPES:
+            raise ValueError(f"goal-model metadata 'covariance_type' = {self.covariance_type_!r}, "
+                             f"expected one of {COVARIANCE_TYPES}")
         self.restart_ = int(metadata.get("restart", 0))
         self.converged_ = bool(metadata.get("converged", True))
         self.n_iter_ = int(metadata.get("n_iter", 0))
@@ -798,3 +868,54 @@ class GoalHMM:
         self.criterion_table_ = list(metadata.get("criterion_table", []))
         self._prepare()
         return self
+
+
+def _validate_fitted_arrays(hmm: "GoalHMM", prefix: str = "") -> None:
+    """Checks a fitted model's arrays (see :meth:`GoalHMM.from_arrays`); casts the integer ones."""
+    def fail(name, message):
+        raise ValueError(f"{prefix}{name}: {message}")
+
+    means = hmm.means_
+    if means.ndim != 2 or means.shape[0] < 1 or means.shape[1] < 1:
+        fail("means", f"shape {means.shape}, expected (k, d) with k, d >= 1")
+    k, d = means.shape
+    shapes = {"startprob": (hmm.startprob_, (k,)), "transmat": (hmm.transmat_, (k, k)),
+              "covars": (hmm.covars_, (k, d, d))}
+    for name, (value, shape) in shapes.items():
+        if value.shape != shape:
+            fail(name, f"shape {value.shape}, expected {shape} for {k} states of {d} features "
+                 f"(means {means.shape})")
+    for name, value in (("means", means), ("startprob", hmm.startprob_), ("transmat", hmm.transmat_),
+                        ("covars", hmm.covars_), ("loglik_per_step", hmm.loglik_per_step_)):
+        if not np.all(np.isfinite(value)):
+            fail(name, "contains NaN or inf")
+    tol = 1e-6
+    if np.any(hmm.startprob_ < 0) or abs(hmm.startprob_.sum() - 1.0) > tol:
+        fail("startprob", f"not a probability vector (sum {hmm.startprob_.sum():.6g}, min "
+             f"{hmm.startprob_.min():.3g}); expected non-negative entries summing to 1")
+    rows = hmm.transmat_.sum(axis=1)
+    if np.any(hmm.transmat_ < 0) or np.any(np.abs(rows - 1.0) > tol):
+        i = int(np.argmax(np.abs(rows - 1.0) + (hmm.transmat_ < 0).any(axis=1)))
+        fail("transmat", f"row {i} sums to {rows[i]:.6g} (min entry {hmm.transmat_[i].min():.3g}); "
+             "expected non-negative rows summing to 1")
+    C = hmm.covars_
+    if not np.allclose(C, np.swapaxes(C, 1, 2), rtol=1e-9, atol=1e-12):
+        fail("covars", "not symmetric")
+    try:
+        np.linalg.cholesky(C)
+    except np.linalg.LinAlgError:
+        fail("covars", "a covariance is not positive definite")
+    term = np.asarray(hmm.terminal_states_)
+    if term.ndim != 1 or term.size == 0 or np.any(term != np.round(term)):
+        fail("terminal_states", f"{term.tolist()}, expected a non-empty list of state indices")
+    term = term.astype(int)
+    if np.any(term < 0) or np.any(term >= k) or len(np.unique(term)) != term.size:
+        fail("terminal_states", f"{term.tolist()}, expected distinct states in [0, {k})")
+    lengths = np.asarray(hmm.lengths_)
+    if lengths.ndim != 1 or lengths.size == 0 or np.any(lengths != np.round(lengths)) or np.any(lengths < 1):
+        fail("lengths", f"{lengths.tolist()}, expected demonstration frame counts >= 1")
+    if hmm.loglik_per_step_.shape != lengths.shape:
+        fail("loglik_per_step", f"shape {hmm.loglik_per_step_.shape}, expected one value per "
+             f"demonstration {lengths.shape}")
+    hmm.terminal_states_ = np.sort(term)
+    hmm.lengths_ = lengths.astype(int)

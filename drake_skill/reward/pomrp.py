@@ -11,7 +11,17 @@ For an execution's goal data ``G = g_1..g_T`` (``G: (T, d)``, 10 Hz frames):
 * sparse verdict: success iff the final state of the Viterbi path is
   terminal (the authors' rule); optionally also the per-frame log-likelihood
   ``log P(G) / T`` must lie within the demonstrations' range widened by a
-  margin (:class:`VerdictConfig`).
+  margin (:class:`VerdictConfig`);
+* off-model guard (a deliberate extension of the thesis, docs/method.md
+  section 4, "Observations the goal model cannot explain";
+  :class:`OffModelConfig`): each frame's best-state log-density
+  ``l_t = max_i log z_i(g_t)`` (nats) is compared with the lowest value
+  ``l_lo`` seen on the demonstration frames.  The dense reward of frame ``t``
+  is multiplied by ``w_t = min(1, exp(l_t - (l_lo - margin)))`` (1 on
+  everything the demonstrations looked like, the likelihood ratio below), and
+  the verdict also requires the final frame to be explained
+  (``l_T >= l_lo - margin``).  ``OffModelConfig(enabled=False)`` is the
+  thesis's plain form.
 
 Values ``v`` come from :mod:`drake_skill.reward.mrp`; rewards are unitless
 (value per frame), returns are sums over frames.
@@ -24,10 +34,17 @@ from typing import Any
 import numpy as np
 from scipy.special import logsumexp
 
-from drake_skill.reward.goal_model import GoalHMM, GoalModelConfig, forward_backward, gaussian_log_density, viterbi
+from drake_skill.reward.goal_model import (
+    GoalHMM,
+    GoalModelConfig,
+    check_sequences,
+    forward_backward,
+    gaussian_log_density,
+    viterbi,
+)
 from drake_skill.reward.mrp import MrpConfig, monte_carlo_values
 
-__all__ = ["VerdictConfig", "PomrpConfig", "Pomrp", "fit_pomrp"]
+__all__ = ["VerdictConfig", "OffModelConfig", "PomrpConfig", "Pomrp", "fit_pomrp"]
 
 
 @dataclass
@@ -46,12 +63,32 @@ class VerdictConfig:
 
 
 @dataclass
+class OffModelConfig:
+    """The off-model guard on rewards and verdict (docs/method.md section 4; not in the thesis).
+
+    Attributes:
+      enabled: weight each frame's dense reward by how well the goal model
+        explains it and require an explained final frame for success; False
+        gives the thesis's plain Eqs. 4.4-4.5 and verdict.
+      margin: nats per frame below the lowest best-state log-density seen on
+        the demonstrations that still count as explained (weight 1).  A
+        project choice: 10 nats is a likelihood ratio of e^-10, e.g. a frame
+        at 6 standard deviations from its state where the demonstrations
+        reached 4.
+    """
+
+    enabled: bool = True
+    margin: float = 10.0
+
+
+@dataclass
 class PomrpConfig:
     """Everything :func:`fit_pomrp` needs (loadable with ``yaml_load_typed``)."""
 
     goal_model: GoalModelConfig = field(default_factory=GoalModelConfig)
     mrp: MrpConfig = field(default_factory=MrpConfig)
     verdict: VerdictConfig = field(default_factory=VerdictConfig)
+    off_model: OffModelConfig = field(default_factory=OffModelConfig)
 
 
 class Pomrp:
@@ -63,10 +100,15 @@ class Pomrp:
       verdict: :class:`VerdictConfig`.
       info: JSON-able provenance saved with the model (``fit_pomrp`` records
         the MRP settings and horizon ``L`` there).
+      off_model: :class:`OffModelConfig` (default: enabled when
+        ``frame_loglik_range`` is given, the plain form otherwise).
+      frame_loglik_range: ``(min, max)`` of ``l_t`` over the demonstration
+        frames (nats); required when the guard is enabled.
     """
 
     def __init__(self, goal_model: GoalHMM, values, verdict: VerdictConfig | None = None,
-                 info: dict[str, Any] | None = None):
+                 info: dict[str, Any] | None = None, off_model: OffModelConfig | None = None,
+                 frame_loglik_range=None):
         goal_model._check_fitted()
         v = np.asarray(values, dtype=float)
         k = goal_model.n_states_
@@ -78,6 +120,21 @@ class Pomrp:
         self.info = dict(info or {})  # JSON-able provenance, e.g. the MRP settings
         if not self.verdict_config.loglik_margin >= 0:
             raise ValueError(f"verdict.loglik_margin: expected >= 0, got {self.verdict_config.loglik_margin}")
+        if off_model is None:  # the guard needs the demonstrations' range
+            off_model = OffModelConfig(enabled=frame_loglik_range is not None)
+        self.off_model_config = off_model
+        if not (np.isfinite(self.off_model_config.margin) and self.off_model_config.margin >= 0):
+            raise ValueError(f"off_model.margin: expected a finite value >= 0 nats, got {self.off_model_config.margin}")
+        if frame_loglik_range is not None:
+            r = np.asarray(frame_loglik_range, dtype=float)
+            if r.shape != (2,) or not np.all(np.isfinite(r)) or r[0] > r[1]:
+                raise ValueError(f"frame_loglik_range: expected finite (min, max) nats, got {r}")
+            frame_loglik_range = (float(r[0]), float(r[1]))
+        elif self.off_model_config.enabled:
+            raise ValueError("frame_loglik_range: required with off_model.enabled (the range of "
+                             "l_t over the demonstrations, recorded by fit_pomrp); refit, or pass "
+                             "OffModelConfig(enabled=False) for the thesis's plain rewards")
+        self.frame_loglik_range = frame_loglik_range
         # Parameters cached once: the reward path must stay well under 1 ms.
         self._startprob = goal_model.startprob_
         self._transmat = goal_model.transmat_
@@ -108,19 +165,34 @@ class Pomrp:
     def _log_b(self, G) -> np.ndarray:
         return self.goal_model.log_emission(G)
 
+    @property
+    def explained_floor(self) -> float:
+        """``l_lo - margin`` (nats): frames with ``l_t`` at or above it are explained; -inf when off."""
+        if not self.off_model_config.enabled:
+            return -np.inf
+        return self.frame_loglik_range[0] - float(self.off_model_config.margin)
+
+    def explained_weights(self, log_b: np.ndarray) -> np.ndarray:
+        """``w_t = min(1, exp(l_t - (l_lo - margin)))`` for ``log_b: (T, k)``; all ones when off."""
+        if not self.off_model_config.enabled:
+            return np.ones(len(log_b))
+        l_t = np.asarray(log_b, dtype=float).max(axis=1)
+        return np.exp(np.minimum(0.0, l_t - self.explained_floor))
+
     # -------------------------------------------------------------- rewards
     def posteriors(self, G):
         """``(filtered (T, k), smoothed (T, k), log P(G))`` for ``G: (T, d)``."""
         return forward_backward(self._log_b(G), self._startprob, self._transmat)
 
     def reward_and_return(self, G) -> tuple[np.ndarray, float]:
-        """Dense rewards ``h (T,)`` (Eq. 4.4) and return ``R`` (Eq. 4.5) of one execution."""
-        _, smoothed, _ = forward_backward(self._log_b(G), self._startprob, self._transmat)
-        h = smoothed @ self.values
+        """Dense rewards ``h (T,)`` (Eq. 4.4, times the off-model weight ``w_t``) and return ``R`` (Eq. 4.5)."""
+        log_b = self._log_b(G)
+        _, smoothed, _ = forward_backward(log_b, self._startprob, self._transmat)
+        h = (smoothed @ self.values) * self.explained_weights(log_b)
         return h, float(h.sum())
 
     def rewards(self, G) -> np.ndarray:
-        """Eq. 4.4: ``h(G, t) = sum_s v(s) P(s_t = s | G)``, ``(T,)``."""
+        """Eq. 4.4: ``h(G, t) = w_t sum_s v(s) P(s_t = s | G)``, ``(T,)`` (``w_t = 1`` in the plain form)."""
         return self.reward_and_return(G)[0]
 
     def episode_return(self, G) -> float:
@@ -129,8 +201,9 @@ class Pomrp:
 
     def filtered_rewards(self, G) -> np.ndarray:
         """Reward available online at each ``t``: ``sum_s v(s) P(s_t = s | g_1..g_t)``, ``(T,)``."""
-        filtered, _, _ = forward_backward(self._log_b(G), self._startprob, self._transmat, smooth=False)
-        return filtered @ self.values
+        log_b = self._log_b(G)
+        filtered, _, _ = forward_backward(log_b, self._startprob, self._transmat, smooth=False)
+        return (filtered @ self.values) * self.explained_weights(log_b)
 
     # ------------------------------------------------------------ streaming
     def log_emission_frame(self, g) -> np.ndarray:
@@ -153,7 +226,8 @@ class Pomrp:
 
         Returns ``(log P(s_t | g_1..g_t) (k,), log P(g_t | g_1..g_{t-1}), reward_t)``;
         the second summed over ``t`` is ``log P(G)``, the third is the
-        filtered reward ``v . P(s_t | g_1..g_t)``.
+        filtered reward ``w_t v . P(s_t | g_1..g_t)`` (the same as
+        :meth:`filtered_rewards` at ``t``).
         """
         log_b = self.log_emission_frame(g)
         if first:
@@ -163,14 +237,17 @@ class Pomrp:
             la = logsumexp(lb[:, None] + self._log_transmat, axis=0) + log_b
         c = float(logsumexp(la))
         la = la - c
-        return la, c, float(np.exp(la) @ self.values)
+        w = float(self.explained_weights(log_b[None, :])[0])
+        return la, c, float(np.exp(la) @ self.values) * w
 
     # -------------------------------------------------------------- verdict
     def verdict_details(self, G) -> dict[str, Any]:
         """The success rule's ingredients for ``G: (T, d)``.
 
         Keys: ``final_state`` (Viterbi), ``terminal`` (final state in ``T``),
-        ``loglik_per_step`` (nats per frame), ``loglik_in_range``, ``success``.
+        ``loglik_per_step`` (nats per frame), ``loglik_in_range``,
+        ``final_frame_loglik`` (``l_T``, nats), ``final_frame_explained``
+        (``l_T >= l_lo - margin``; True when the guard is off), ``success``.
         """
         log_b = self._log_b(G)
         path, _ = viterbi(log_b, self._startprob, self._transmat)
@@ -179,12 +256,16 @@ class Pomrp:
         lo, hi = self.loglik_range
         terminal = bool(np.isin(path[-1], self.terminal_states))
         in_range = bool(lo <= per_step <= hi)
-        success = terminal and (in_range or not self.verdict_config.require_likelihood)
+        final_ll = float(log_b[-1].max())
+        explained = bool(final_ll >= self.explained_floor)
+        success = terminal and explained and (in_range or not self.verdict_config.require_likelihood)
         return {"final_state": int(path[-1]), "terminal": terminal, "loglik_per_step": float(per_step),
-                "loglik_in_range": in_range, "success": bool(success)}
+                "loglik_in_range": in_range, "final_frame_loglik": final_ll,
+                "final_frame_explained": explained, "success": bool(success)}
 
     def verdict(self, G) -> bool:
-        """Sparse success: Viterbi final state is terminal (and, if configured, likelihood in range)."""
+        """Sparse success: Viterbi final state terminal, final frame explained (guard on) and,
+        if configured, likelihood in range."""
         return self.verdict_details(G)["success"]
 
     # ------------------------------------------------------------ save/load
@@ -193,18 +274,36 @@ class Pomrp:
         arrays, meta = self.goal_model.to_arrays()
         out = {f"hmm_{k}": v for k, v in arrays.items()}
         out["values"] = self.values.copy()
+        if self.frame_loglik_range is not None:
+            out["frame_loglik_range"] = np.array(self.frame_loglik_range)
         return out, {"hmm": meta, "info": self.info, "verdict": {
             "require_likelihood": bool(self.verdict_config.require_likelihood),
-            "loglik_margin": float(self.verdict_config.loglik_margin)}}
+            "loglik_margin": float(self.verdict_config.loglik_margin)},
+            "off_model": dataclasses.asdict(self.off_model_config)}
 
     @classmethod
-    def from_arrays(cls, arrays: dict[str, np.ndarray], metadata: dict[str, Any]) -> "Pomrp":
+    def from_arrays(cls, arrays: dict[str, np.ndarray], metadata: dict[str, Any],
+                    prefix: str = "") -> "Pomrp":
+        """Inverse of :meth:`to_arrays`; ``prefix`` names the arrays in error messages.
+
+        Metadata without ``off_model`` (written before the guard existed) load
+        with the guard off: the demonstrations' ``l_t`` range was not recorded.
+        """
         if "values" not in arrays:
-            raise ValueError("arrays: missing 'values'")
+            raise ValueError(f"missing array '{prefix}values'")
         hmm = GoalHMM.from_arrays({k[4:]: v for k, v in arrays.items() if k.startswith("hmm_")},
-                                  metadata.get("hmm", {}))
-        return cls(hmm, arrays["values"], VerdictConfig(**metadata.get("verdict", {})),
-                   metadata.get("info", {}))
+                                  metadata.get("hmm", {}), prefix=prefix + "hmm_")
+        values = np.asarray(arrays["values"])
+        if values.shape != (hmm.n_states_,) or not np.all(np.isfinite(values)):
+            raise ValueError(f"{prefix}values: expected {hmm.n_states_} finite state values, got shape "
+                             f"{values.shape}")
+        try:
+            verdict = VerdictConfig(**metadata.get("verdict", {}))
+            off_model = OffModelConfig(**metadata.get("off_model", {"enabled": False}))
+        except TypeError as e:
+            raise ValueError(f"POMRP metadata: {e}") from e
+        return cls(hmm, values, verdict, metadata.get("info", {}), off_model,
+                   arrays.get("frame_loglik_range"))
 
 
 def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
@@ -222,4 +321,6 @@ def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
                            n_sequences=mc.n_sequences, gamma=mc.gamma,
                            terminal_scale=mc.terminal_scale, random_state=mc.random_state)
     info = {"mrp": dataclasses.asdict(mc), "mrp_length": L}
-    return Pomrp(hmm, v, config.verdict, info)
+    X, lengths = check_sequences(X, lengths)
+    l_t = hmm.frame_loglik(X)
+    return Pomrp(hmm, v, config.verdict, info, config.off_model, (float(l_t.min()), float(l_t.max())))
