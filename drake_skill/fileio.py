@@ -80,3 +80,135 @@ def write_figure_png(fig, path: str | os.PathLike, **savefig_kwargs) -> Path:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", **savefig_kwargs)
     return atomic_write_bytes(path, buf.getvalue())
+
+
+# ------------------------------------------------------------------ directories
+def file_sha256(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Atomically swaps two directory entries (Linux ``renameat2(RENAME_EXCHANGE)``).
+
+    Returns False where the call is not available (other systems, old
+    kernels, file systems without support); nothing is changed then.
+    """
+    import ctypes
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        renameat2 = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    AT_FDCWD, RENAME_EXCHANGE = -100, 2
+    rc = renameat2(AT_FDCWD, os.fsencode(a), AT_FDCWD, os.fsencode(b), RENAME_EXCHANGE)
+    if rc == 0:
+        return True
+    err = ctypes.get_errno()
+    import errno
+
+    if err in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP if hasattr(errno, "ENOTSUP") else errno.EINVAL):
+        return False
+    raise OSError(err, f"cannot swap {a} and {b}: {os.strerror(err)}")
+
+
+def _swap_in(new: Path, target: Path) -> Path | None:
+    """Puts directory ``new`` at ``target``; returns where the old ``target`` went (or None).
+
+    With an existing ``target`` the two are exchanged atomically where the
+    system allows it, so ``target`` always names a complete directory (old,
+    then new). Elsewhere ``target`` is renamed aside first and there is an
+    instant with no ``target`` (never a mix); :func:`interrupted_swap`
+    reports it to loaders.
+    """
+    if not target.exists():
+        os.rename(new, target)
+        return None
+    if _exchange(new, target):
+        return new
+    aside = target.with_name(f".{target.name}.old-{os.getpid()}")
+    os.rename(target, aside)
+    os.rename(new, target)
+    return aside
+
+
+def _remove_tree(path: Path) -> None:
+    import shutil
+
+    shutil.rmtree(path, ignore_errors=True)
+
+
+def interrupted_swap(target: str | os.PathLike) -> list[Path]:
+    """The aside copies a directory swap interrupted between its two renames left next to ``target``."""
+    target = Path(target)
+    return sorted(target.parent.glob(f".{target.name}.old-*")) if target.parent.is_dir() else []
+
+
+def _fsync_tree(path: Path) -> None:
+    for p in [*sorted(path.rglob("*")), path]:
+        if p.is_dir():
+            fd = os.open(p, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+
+
+class staged_directory:
+    """Writes a directory's files as one unit: ``with staged_directory(target) as tmp: ...``.
+
+    Files are written into ``tmp``, a new hidden sibling of ``target``; on a
+    normal exit ``tmp`` replaces ``target`` in one swap (see :func:`_swap_in`)
+    and the old contents are deleted. On an exception (or an interruption)
+    ``tmp`` is removed and ``target`` is untouched. So ``target`` holds either
+    the whole old set of files or the whole new one, never a mix.
+
+    ``overwrite=False`` refuses (FileExistsError) an existing non-empty ``target``.
+    """
+
+    def __init__(self, target: str | os.PathLike, overwrite: bool = False):
+        self.target = Path(target)
+        self.overwrite = overwrite
+        self.tmp: Path | None = None
+
+    def __enter__(self) -> Path:
+        t = self.target
+        if t.exists() and not t.is_dir():
+            raise NotADirectoryError(f"{t}: exists and is not a directory; choose a folder path")
+        if t.is_dir() and any(t.iterdir()) and not self.overwrite:
+            raise FileExistsError(f"{t}: exists and is not empty; pass overwrite / --force to replace it")
+        t.parent.mkdir(parents=True, exist_ok=True)
+        self.tmp = Path(tempfile.mkdtemp(prefix=f".{t.name}.new-", dir=t.parent))
+        os.chmod(self.tmp, 0o777 & ~_umask())
+        return self.tmp
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        assert self.tmp is not None
+        if exc_type is not None:
+            _remove_tree(self.tmp)
+            return False
+        try:
+            _fsync_tree(self.tmp)
+            old = _swap_in(self.tmp, self.target)
+        except BaseException:
+            _remove_tree(self.tmp)
+            raise
+        if old is not None:
+            _remove_tree(old)
+        return False
+
+
+def _umask() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask

@@ -17,16 +17,18 @@
 A :class:`Skill` saves to a directory and loads back identical, without
 pickle::
 
-    skill.yaml          SkillConfig (yaml_load_typed) + summary
-    skill.json          metadata: schema version, goal-model metadata, info
+    skill.yaml          SkillConfig (yaml_load_typed)
+    skill.json          metadata: schema version, skill name, SHA-256 of the
+                        three other files, goal-model metadata, info
     arrays.npz          DMPs, Sigma_0, PCA, HMM arrays, state values
     pcae.safetensors    the encoder weights the goal data were made with
+
+The directory is written as one unit (a new directory swapped in), and
+:meth:`Skill.load` validates it as strictly as a fit.
 """
 
 import dataclasses as dc
-import hashlib
 import json
-import shutil
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -34,12 +36,12 @@ import numpy as np
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
 from drake_skill.action.dmp import Dmp, DmpConfig, fit_demonstrations
-from drake_skill.fileio import atomic_save_npz, atomic_write_json, atomic_write_text, load_npz
+from drake_skill import fileio
 from drake_skill.perception.features import GoalFeatures, GoalFeaturesConfig
 from drake_skill.reward.pomrp import Pomrp, PomrpConfig, fit_pomrp
-from drake_skill.station.config import SKILLS
+from drake_skill.common import SKILLS
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 # Thesis Table 6.1 (simulation: Open 20, Close 10; real robot: Draw 9).
 DEFAULT_BASES = {"open": 20, "close": 10, "draw": 9}
@@ -77,10 +79,6 @@ def default_skill_config(skill: str) -> SkillConfig:
 def _pcae_path(config: SkillConfig) -> Path:
     from drake_skill.perception.pcae import DEFAULT_WEIGHTS
     return Path(config.pcae_weights) if config.pcae_weights else Path(DEFAULT_WEIGHTS)
-
-
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def hold_invalid(codes: np.ndarray, valid: np.ndarray, name: str = "frames") -> np.ndarray:
@@ -191,64 +189,202 @@ class Skill:
 
     # ------------------------------------------------------------ save/load
     def save(self, directory, overwrite: bool = False) -> Path:
-        """Writes the skill to ``directory`` (refuses to overwrite unless asked)."""
+        """Writes the skill to ``directory`` as one unit (refuses to overwrite unless asked).
+
+        The files are written into a new sibling directory which then
+        replaces ``directory`` in one swap (:class:`drake_skill.fileio.staged_directory`),
+        so an interruption leaves the whole old skill or the whole new one.
+        ``skill.json`` records the SHA-256 of every other file; :meth:`load`
+        checks them. Other files in an existing ``directory`` (pictures of an
+        earlier fit) go with the old skill.
+        """
         directory = Path(directory)
+        if directory.exists() and not directory.is_dir():
+            raise NotADirectoryError(f"{directory}: exists and is not a directory; choose a folder for the skill")
         if (directory / "skill.json").exists() and not overwrite:
-            raise FileExistsError(f"{directory} already holds a skill; pass overwrite=True to replace it")
-        directory.mkdir(parents=True, exist_ok=True)
+            raise FileExistsError(f"{directory} already holds a skill; pass overwrite=True (--force) to replace it")
+        if directory.is_dir() and any(directory.iterdir()) and not (directory / "skill.json").exists() \
+                and not overwrite:
+            raise FileExistsError(f"{directory}: exists, is not empty and holds no skill; choose an empty "
+                                  "or new folder, or pass overwrite=True (--force)")
         arrays = {"sigma0": self.sigma0, "initial_index": np.array(self.initial_index)}
         for i, dmp in enumerate(self.dmps):
             arrays.update(dmp.to_arrays(prefix=f"dmp{i}_"))
         arrays.update({f"pca_{k}": v for k, v in self.goal_features.to_arrays().items()})
         pomrp_arrays, pomrp_meta = self.pomrp.to_arrays()
         arrays.update({f"pomrp_{k}": v for k, v in pomrp_arrays.items()})
-        weights = directory / "pcae.safetensors"
-        if self.pcae_weights.resolve() != weights.resolve():
-            shutil.copyfile(self.pcae_weights, weights.with_suffix(".tmp"))
-            weights.with_suffix(".tmp").replace(weights)
-        atomic_save_npz(directory / "arrays.npz", arrays)
-        atomic_write_text(directory / "skill.yaml", yaml_dump_typed(self.config))
-        atomic_write_json(directory / "skill.json", {
-            "schema": "drake_skill.skill", "schema_version": SCHEMA_VERSION,
-            "n_demonstrations": len(self.dmps), "pomrp": pomrp_meta, "info": self.info,
-            "pcae_sha256": _sha256(weights)})
+        weights_bytes = Path(self.pcae_weights).read_bytes()
+        with fileio.staged_directory(directory, overwrite=True) as tmp:
+            fileio.atomic_write_bytes(tmp / "pcae.safetensors", weights_bytes)
+            fileio.atomic_save_npz(tmp / "arrays.npz", arrays)
+            fileio.atomic_write_text(tmp / "skill.yaml", yaml_dump_typed(self.config))
+            files = {name: fileio.file_sha256(tmp / name) for name in _SKILL_FILES}
+            fileio.atomic_write_json(tmp / "skill.json", {
+                "schema": "drake_skill.skill", "schema_version": SCHEMA_VERSION, "skill": self.name,
+                "n_demonstrations": len(self.dmps), "pomrp": pomrp_meta, "info": self.info,
+                "sha256": files, "pcae_sha256": files["pcae.safetensors"]})
         return directory
 
     @classmethod
     def load(cls, directory) -> "Skill":
-        """Reads a skill written by :meth:`save`; errors name the file and what is wrong."""
+        """Reads a skill written by :meth:`save`, validated as strictly as a fitted one.
+
+        Errors (FileNotFoundError, NotADirectoryError, ValueError) name the
+        file and the field. Checked: every file's SHA-256 against
+        ``skill.json`` (a partial or mixed set fails), ``skill.yaml`` against
+        the arrays (skill name, ``n_basis``, quaternion mode, PCA size,
+        reward settings), the DMPs, ``initial_index``, ``Sigma_0`` (shape,
+        finite, symmetric positive definite), the PCA and the goal HMM
+        (:meth:`drake_skill.reward.goal_model.GoalHMM.from_arrays`).
+
+        Skills saved with schema version 1 (before the checksums of every
+        file, the DMP amplitude default and the off-model guard) still load:
+        only ``pcae.safetensors`` is checksummed, a DMP field absent from
+        their ``skill.yaml`` takes the thesis form (``scale_by_amplitude:
+        true``, what every version-1 skill was fitted with), and the
+        off-model guard is off (the demonstrations' range was not recorded).
+        """
         directory = Path(directory)
+        if not directory.exists():
+            aside = fileio.interrupted_swap(directory)
+            hint = f"; an interrupted save left the previous skill in {aside[-1]}" if aside else ""
+            raise FileNotFoundError(f"{directory}: no such skill folder{hint}")
+        if not directory.is_dir():
+            raise NotADirectoryError(f"{directory}: not a folder; expected a skill folder written by Skill.save")
         meta_path = directory / "skill.json"
         if not meta_path.is_file():
             raise FileNotFoundError(f"{directory}: no skill.json (not a skill directory)")
         try:
             meta = json.loads(meta_path.read_text())
-        except json.JSONDecodeError as e:
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
             raise ValueError(f"{meta_path}: not valid JSON ({e})") from e
-        if meta.get("schema") != "drake_skill.skill" or meta.get("schema_version") != SCHEMA_VERSION:
-            raise ValueError(f"{meta_path}: schema {meta.get('schema')!r} version "
-                             f"{meta.get('schema_version')!r}, expected drake_skill.skill {SCHEMA_VERSION}")
-        try:
-            config = yaml_load_typed(schema=SkillConfig, filename=str(directory / "skill.yaml"),
-                                     defaults=SkillConfig())
-        except RuntimeError as e:
-            raise ValueError(f"{directory / 'skill.yaml'}: {e}") from e
-        arrays = load_npz(directory / "arrays.npz")
+        if not isinstance(meta, dict):
+            raise ValueError(f"{meta_path}: expected a JSON object")
+        version = meta.get("schema_version")
+        if meta.get("schema") != "drake_skill.skill" or version not in _READABLE_VERSIONS:
+            raise ValueError(f"{meta_path}: schema {meta.get('schema')!r} version {version!r}, expected "
+                             f"drake_skill.skill version {' or '.join(map(str, _READABLE_VERSIONS))}")
+        _check_checksums(directory, meta, version)
+        config = _load_config(directory / "skill.yaml", version)
+        arrays = fileio.load_npz(directory / "arrays.npz")
         weights = directory / "pcae.safetensors"
-        if not weights.is_file():
-            raise FileNotFoundError(f"{weights}: the skill's PCAE weights are missing")
-        if _sha256(weights) != meta.get("pcae_sha256"):
-            raise ValueError(f"{weights}: contents differ from the weights the skill was fitted with")
+        where = directory / "arrays.npz"
         try:
-            n = int(meta["n_demonstrations"])
-            dmps = [Dmp.from_arrays(arrays, prefix=f"dmp{i}_") for i in range(n)]
-            pca = GoalFeatures.from_arrays({k[4:]: v for k, v in arrays.items() if k.startswith("pca_")})
-            pomrp = Pomrp.from_arrays({k[6:]: v for k, v in arrays.items() if k.startswith("pomrp_")},
-                                      meta["pomrp"])
-            return cls(config, dmps, int(arrays["initial_index"]), arrays["sigma0"], pca, pomrp,
-                       weights, meta["info"])
-        except (KeyError, ValueError) as e:
-            raise ValueError(f"{directory / 'arrays.npz'}: {e}") from e
+            skill = _skill_from_arrays(config, arrays, meta, weights, version)
+        except KeyError as e:
+            raise ValueError(f"{where}: missing entry {e}") from e
+        except ValueError as e:
+            if str(e).startswith(str(directory)):
+                raise
+            raise ValueError(f"{where}: {e}") from e
+        return skill
+
+
+_SKILL_FILES = ("pcae.safetensors", "arrays.npz", "skill.yaml")
+_READABLE_VERSIONS = (1, 2)
+
+
+def _check_checksums(directory: Path, meta: dict, version: int) -> None:
+    """Every file of the skill against the SHA-256 recorded in skill.json."""
+    meta_path = directory / "skill.json"
+    for name in _SKILL_FILES:
+        if not (directory / name).is_file():
+            raise FileNotFoundError(f"{directory / name}: missing; the skill folder is incomplete "
+                                    "(copy the whole folder, or fit the skill again)")
+    if version == 1:
+        expected = {"pcae.safetensors": meta.get("pcae_sha256")}
+    else:
+        expected = meta.get("sha256")
+        if not isinstance(expected, dict) or set(expected) != set(_SKILL_FILES):
+            raise ValueError(f"{meta_path}: field 'sha256' must list {', '.join(_SKILL_FILES)}")
+    for name, digest in expected.items():
+        if fileio.file_sha256(directory / name) != digest:
+            raise ValueError(f"{directory / name}: contents differ from the checksum in {meta_path.name} "
+                             "(a partial copy, an edit, or files of two different skills); "
+                             "restore the folder or fit the skill again")
+
+
+def _load_config(path: Path, version: int) -> SkillConfig:
+    defaults = SkillConfig()
+    if version == 1:
+        # Every version-1 skill was fitted with the thesis's amplitude scaling.
+        defaults.dmp.scale_by_amplitude = True
+    try:
+        config = yaml_load_typed(schema=SkillConfig, filename=str(path), defaults=defaults)
+    except RuntimeError as e:
+        raise ValueError(f"{path}: {e}") from e
+    if config.skill not in SKILLS:
+        raise ValueError(f"{path}: field 'skill' is {config.skill!r}; expected one of {', '.join(SKILLS)}")
+    try:
+        config.dmp.validate()
+    except ValueError as e:
+        raise ValueError(f"{path}: field 'dmp': {e}") from e
+    return config
+
+
+def _skill_from_arrays(config: SkillConfig, arrays: dict, meta: dict, weights: Path, version: int) -> "Skill":
+    yaml_path = weights.with_name("skill.yaml")
+    json_path = weights.with_name("skill.json")
+    if version >= 2 and meta.get("skill") != config.skill:
+        raise ValueError(f"{json_path}: field 'skill' is {meta.get('skill')!r} but {yaml_path.name} says "
+                         f"{config.skill!r}; the files come from different skills")
+    try:
+        n = int(meta["n_demonstrations"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"{json_path}: field 'n_demonstrations' missing or not an integer") from e
+    if n < 1:
+        raise ValueError(f"{json_path}: field 'n_demonstrations' is {n}; expected >= 1")
+    dmps = []
+    for i in range(n):
+        try:
+            dmp = Dmp.from_arrays(arrays, prefix=f"dmp{i}_")
+        except ValueError as e:
+            raise ValueError(f"dmp{i}: {e}") from e
+        dmps.append(dmp)
+    B, d = config.dmp.n_basis, config.dmp.weight_dim
+    for i, dmp in enumerate(dmps):
+        if dmp.weights.shape != (B, d):
+            raise ValueError(f"dmp{i}_weights: shape {dmp.weights.shape} disagrees with {yaml_path.name} "
+                             f"(dmp.n_basis = {B}, dmp.quaternion = {config.dmp.quaternion!r}: expected ({B}, {d}))")
+    raw_index = np.asarray(arrays["initial_index"])
+    if raw_index.shape != () or raw_index.dtype.kind not in "iu" or not 0 <= int(raw_index) < n:
+        raise ValueError(f"initial_index: {raw_index.tolist()!r}, expected an integer in [0, {n}) "
+                         f"(one of the {n} demonstrations)")
+    sigma0 = np.asarray(arrays["sigma0"], dtype=float)
+    if sigma0.shape != (B, d, d):
+        raise ValueError(f"sigma0: shape {sigma0.shape}, expected ({B}, {d}, {d}) for {B} bases of {d} weights")
+    if not np.all(np.isfinite(sigma0)):
+        raise ValueError("sigma0: contains NaN or inf")
+    if not np.allclose(sigma0, np.swapaxes(sigma0, 1, 2), rtol=1e-9, atol=1e-15):
+        raise ValueError("sigma0: a covariance is not symmetric")
+    try:
+        np.linalg.cholesky(sigma0)
+    except np.linalg.LinAlgError as e:
+        raise ValueError("sigma0: a covariance is not positive definite") from e
+    pca = GoalFeatures.from_arrays({k[4:]: v for k, v in arrays.items() if k.startswith("pca_")})
+    from drake_skill.perception.pcae import CODE_SIZE
+    if pca.components_.shape[1] != CODE_SIZE or pca.n_components != config.goal_features.n_components:
+        raise ValueError(f"pca_components: shape {pca.components_.shape} disagrees with {yaml_path.name} "
+                         f"(goal_features.n_components = {config.goal_features.n_components}) and the "
+                         f"{CODE_SIZE}-D PCAE code")
+    pomrp_meta = meta.get("pomrp")
+    if not isinstance(pomrp_meta, dict):
+        raise ValueError(f"{json_path}: field 'pomrp' missing or not an object")
+    pomrp = Pomrp.from_arrays({k[6:]: v for k, v in arrays.items() if k.startswith("pomrp_")},
+                              pomrp_meta, prefix="pomrp_")
+    if pomrp.n_features != pca.n_components:
+        raise ValueError(f"pomrp_hmm_means: {pomrp.n_features} features per frame, but the PCA gives "
+                         f"{pca.n_components}")
+    if version == 1:
+        config.pomrp.off_model.enabled = False  # not recorded before version 2 (see Skill.load)
+    for name, saved in (("verdict", pomrp.verdict_config), ("off_model", pomrp.off_model_config)):
+        if getattr(config.pomrp, name) != saved:
+            raise ValueError(f"pomrp.{name}: {yaml_path.name} says {getattr(config.pomrp, name)} but the "
+                             f"fitted reward in {json_path.name} uses {saved}")
+    info = meta.get("info")
+    if not isinstance(info, dict):
+        raise ValueError(f"{json_path}: field 'info' missing or not an object")
+    return Skill(config, dmps, int(raw_index), sigma0, pca, pomrp, weights, info)
 
 
 def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
@@ -263,8 +399,18 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
             raise ValueError(f"demos[{i}]: recorded without perception (no object_points); "
                              "record demonstrations with the camera on")
         skill = getattr(demo, "skill", config.skill)
+        name = getattr(demo, "path", None) or f"demos[{i}]"
         if skill != config.skill:
-            raise ValueError(f"demos[{i}]: a '{skill}' demonstration given to fit '{config.skill}'")
+            raise ValueError(f"{name}: a '{skill}' demonstration given to fit '{config.skill}'")
+        n = len(demo.times)
+        k_min = int(config.pomrp.goal_model.n_states_min)
+        if n < k_min:
+            raise ValueError(f"{name}: {n} frames at 10 Hz, fewer than the goal model's smallest state count "
+                             f"(pomrp.goal_model.n_states_min = {k_min}); record a longer demonstration "
+                             "or lower n_states_min")
+        if n < int(config.dmp.n_basis):
+            raise ValueError(f"{name}: {n} frames at 10 Hz, fewer than the {config.dmp.n_basis} DMP bases "
+                             "(dmp.n_basis); record a longer demonstration or use fewer bases")
 
     fit = fit_demonstrations([(d.times, d.X_OE) for d in demos], config.dmp,
                              seed=config.seed, ridge=config.dmp_ridge)

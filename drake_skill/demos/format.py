@@ -83,6 +83,8 @@ __all__ = [
     "load_demonstrations",
     "demo_path",
     "existing_demo_files",
+    "save_demonstrations",
+    "MANIFEST",
 ]
 
 SCHEMA = "drake-skill-demonstration"
@@ -90,6 +92,14 @@ SCHEMA_VERSION = 1
 #: Fewest 10 Hz samples a demonstration may have (1 s of motion).
 MIN_SAMPLES = 10
 QUATERNION_TOLERANCE = 1e-3
+#: A frame marked valid must have a segmented cloud at least this wide (m) along
+#: two axes (the objects are 0.1-0.3 m; a point, a line or all zeros is not a cloud).
+MIN_CLOUD_EXTENT_M = 0.005
+#: How far X_OE may be from X_OE_100hz at the same instant (m, and quaternion
+#: components up to sign): X_OE is a subsample, so only rounding separates them.
+SUBSAMPLE_TOLERANCE = 1e-6
+#: The file that lists a recorded set of demonstrations (written by save_demonstrations).
+MANIFEST = "demos.json"
 ACTION_RAW_HZ = 100.0
 ACTION_HZ = 10.0
 
@@ -180,6 +190,7 @@ class Demonstration:
             _fail(where, "times", f"spans {t10[0]:.3f}..{t10[-1]:.3f} s, outside times_100hz "
                   f"{t_raw[0]:.3f}..{t_raw[-1]:.3f} s")
         _poses(where, "X_OE", self.X_OE, m)
+        _subsample_consistent(where, t_raw, self.X_OE_100hz, t10, self.X_OE)
         _poses(where, "X_WO_true", self.X_WO_true, None)
         present = [name for name in _PERCEPTION if getattr(self, name) is not None]
         if present and len(present) != len(_PERCEPTION):
@@ -190,15 +201,24 @@ class Demonstration:
             _poses(where, "X_WO_start", self.X_WO_start, None)
             pts = self.object_points
             if not isinstance(pts, np.ndarray) or pts.dtype != np.float32 or pts.ndim != 3 \
-                    or pts.shape[0] != m or pts.shape[2] != 3 or pts.shape[1] < 1:
+                    or pts.shape[0] != m or pts.shape[2] != 3 or pts.shape[1] != N_POINTS:
                 _fail(where, "object_points", f"has shape {getattr(pts, 'shape', None)} dtype "
-                      f"{getattr(pts, 'dtype', None)}; expected ({m}, N, 3) float32")
+                      f"{getattr(pts, 'dtype', None)}; expected ({m}, {N_POINTS}, 3) float32 "
+                      f"({N_POINTS} points per frame, docs/method.md section 3)")
             if not np.all(np.isfinite(pts)):
                 _fail(where, "object_points", "contains NaN or inf")
             valid = self.perception_valid
             if not isinstance(valid, np.ndarray) or valid.dtype != np.bool_ or valid.shape != (m,):
                 _fail(where, "perception_valid", f"has shape {getattr(valid, 'shape', None)} dtype "
                       f"{getattr(valid, 'dtype', None)}; expected ({m},) bool")
+            if valid.any():
+                extent = np.ptp(pts[valid], axis=1)  # (n_valid, 3) bounding-box sizes, m
+                wide = (extent >= MIN_CLOUD_EXTENT_M).sum(axis=1)
+                if np.any(wide < 2):
+                    k = int(np.flatnonzero(valid)[int(np.argmax(wide < 2))])
+                    _fail(where, "object_points", f"frame {k} is marked valid but its cloud is degenerate "
+                          f"(bounding box {np.ptp(pts[k], axis=0).round(4).tolist()} m; expected at least "
+                          f"{MIN_CLOUD_EXTENT_M} m along two axes); mark it invalid in perception_valid")
         try:
             json.dumps(self.metadata)
         except (TypeError, ValueError) as e:
@@ -251,6 +271,25 @@ def _times(where, field, value, min_len) -> np.ndarray:
         _fail(where, field, f"is not strictly increasing (t[{k}] = {t[k]:.6g} s, "
               f"t[{k + 1}] = {t[k + 1]:.6g} s)")
     return t
+
+
+def _subsample_consistent(where, t_raw, X_raw, t10, X10) -> None:
+    """``times`` must be instants of ``times_100hz`` and ``X_OE`` the raw poses there."""
+    idx = np.clip(np.searchsorted(t_raw, t10), 0, len(t_raw) - 1)
+    prev = np.clip(idx - 1, 0, len(t_raw) - 1)
+    idx = np.where(np.abs(t_raw[prev] - t10) < np.abs(t_raw[idx] - t10), prev, idx)
+    off = np.abs(t_raw[idx] - t10)
+    if np.any(off > 1e-9):
+        k = int(np.argmax(off))
+        _fail(where, "times", f"sample {k} ({t10[k]:.6f} s) is not one of the times_100hz instants; "
+              "expected the 10 Hz times to be a subset of the raw ones (downsample_action)")
+    dp = np.abs(X10[:, :3] - X_raw[idx, :3]).max(axis=1)
+    dq = 1.0 - np.abs(np.einsum("ti,ti->t", X10[:, 3:], X_raw[idx, 3:]))  # 0 for q or -q
+    bad = (dp > SUBSAMPLE_TOLERANCE) | (dq > SUBSAMPLE_TOLERANCE)
+    if np.any(bad):
+        k = int(np.argmax(bad))
+        _fail(where, "X_OE", f"sample {k} ({t10[k]:.3f} s) differs from X_OE_100hz at the same instant "
+              f"(position by {dp[k]:.3g} m); X_OE must be X_OE_100hz subsampled (downsample_action)")
 
 
 def _poses(where, field, value, n) -> np.ndarray:
@@ -388,6 +427,7 @@ def load_demonstrations(directory, skill: str | None = None) -> list[Demonstrati
     paths = sorted(directory.glob("demo_*.npz"))
     if not paths:
         raise FileNotFoundError(f"{directory}: no demo_*.npz files")
+    _check_manifest(directory, paths)
     demos = [load_demonstration(p) for p in paths]
     if skill is not None:
         for p, d in zip(paths, demos):
@@ -400,3 +440,83 @@ def existing_demo_files(directory) -> list[Path]:
     """The ``demo_*.npz`` already in ``directory`` (empty if it does not exist)."""
     directory = Path(directory)
     return sorted(directory.glob("demo_*.npz")) if directory.is_dir() else []
+
+
+# ---------------------------------------------------------------- sets of files
+def _check_manifest(directory: Path, paths: list[Path]) -> None:
+    """With a ``demos.json`` (written by :func:`save_demonstrations`), the folder must hold exactly its files."""
+    from drake_skill.fileio import file_sha256
+
+    manifest = directory / MANIFEST
+    if not manifest.is_file():
+        return  # a folder assembled by hand (save_demonstration one by one)
+    try:
+        meta = json.loads(manifest.read_text())
+        files = dict(meta["files"])
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError, ValueError) as e:
+        raise DemonstrationError(f"{manifest}: not a drake-skill demonstration list ({e}); delete it "
+                                 "if the folder was assembled by hand") from e
+    names = sorted(p.name for p in paths)
+    if names != sorted(files):
+        extra = sorted(set(names) - set(files))
+        missing = sorted(set(files) - set(names))
+        raise DemonstrationError(
+            f"{directory}: the demonstration files do not match {MANIFEST} (missing {missing}, not listed "
+            f"{extra}); the folder mixes recordings. Record the set again (demos record --force)")
+    for p in paths:
+        if file_sha256(p) != files[p.name]:
+            raise DemonstrationError(f"{p}: contents differ from the checksum in {manifest}; the folder mixes "
+                                     "recordings. Record the set again (demos record --force)")
+
+
+def save_demonstrations(demos, directory, force: bool = False, extra=None) -> list[Path]:
+    """Writes a set of demonstrations to ``directory`` as one unit.
+
+    ``demo_000.npz``, ``demo_001.npz``, ... and ``demos.json`` (their
+    SHA-256) are written into a new directory that then replaces
+    ``directory`` in one swap (:class:`drake_skill.fileio.staged_directory`):
+    an interruption leaves the whole old set or the whole new one. Other
+    files already in ``directory`` (not ``demo_*.npz``, ``demos.json`` or
+    ``demos.png``) are carried over. ``extra(tmp_dir)``, if given, writes
+    more files into the new set (the CLI's ``demos.png``).
+
+    Refuses (FileExistsError) to replace existing demonstrations unless ``force``.
+    """
+    import os
+    import shutil
+
+    from drake_skill import fileio
+
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise NotADirectoryError(f"{directory}: exists and is not a folder; choose a folder for the demonstrations")
+    existing = existing_demo_files(directory)
+    if existing and not force:
+        raise FileExistsError(
+            f"{directory} already holds {len(existing)} demonstration file(s) "
+            f"({', '.join(p.name for p in existing[:3])}{', ...' if len(existing) > 3 else ''}); "
+            "pass --force to replace them or choose another --out")
+    for i, demo in enumerate(demos):
+        demo.validate(str(demo_path(directory, i)))
+    ours = {MANIFEST, "demos.png"}
+    with fileio.staged_directory(directory, overwrite=True) as tmp:
+        if directory.is_dir():
+            for p in directory.iterdir():
+                if p.name in ours or (p.name.startswith("demo_") and p.suffix == ".npz"):
+                    continue
+                if p.is_dir():
+                    shutil.copytree(p, tmp / p.name, symlinks=True)
+                else:
+                    try:
+                        os.link(p, tmp / p.name)
+                    except OSError:
+                        shutil.copy2(p, tmp / p.name)
+        files = {}
+        for i, demo in enumerate(demos):
+            path = demo_path(tmp, i)
+            fileio.atomic_save_npz(path, demo.to_arrays())
+            files[path.name] = fileio.file_sha256(path)
+        if extra is not None:
+            extra(tmp)
+        fileio.atomic_write_json(tmp / MANIFEST, {"schema": "drake-skill-demonstration-set", "files": files})
+    return [demo_path(directory, i) for i in range(len(demos))]
