@@ -202,6 +202,42 @@ def test_bad_weight_files(tmp_path, random_model):
         pcae.load_pcae(truncated)
 
 
+def test_header_is_checked_before_allocating(tmp_path, random_model):
+    """A header claiming 10^8 points (a 307 GB decoder) is refused from the header alone."""
+    import resource
+
+    from safetensors.torch import load_file, save_file
+
+    tensors = load_file(str(pcae.save_pcae(random_model, tmp_path / "good.safetensors")))
+    huge = tmp_path / "huge.safetensors"
+    save_file(tensors, str(huge), metadata={"n_points": str(10**8), "code_size": "128"})
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    with pytest.raises(ValueError, match=r"huge.safetensors: header field 'n_points' is '100000000'; "
+                                         r"this PCAE architecture has n_points = 2048"):
+        pcae.load_pcae(huge)
+    assert resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before < 200_000  # KiB: nothing sized from it
+    save_file(tensors, str(tmp_path / "code.safetensors"), metadata={"code_size": "64"})
+    with pytest.raises(ValueError, match=r"code.safetensors: header field 'code_size' is '64'"):
+        pcae.load_pcae(tmp_path / "code.safetensors")
+    doubles = {k: (v.double() if v.is_floating_point() else v) for k, v in tensors.items()}
+    save_file(doubles, str(tmp_path / "f64.safetensors"))
+    with pytest.raises(ValueError, match=r"f64.safetensors: tensor '.*' has dtype F64, expected F32"):
+        pcae.load_pcae(tmp_path / "f64.safetensors")
+
+
+def test_empty_batches_and_overflow_are_clear_errors(random_model):
+    with pytest.raises(ValueError, match=r"points: the batch is empty \(shape \(0, 2048, 3\)\)"):
+        random_model.encode_points(np.zeros((0, 2048, 3), np.float32))
+    cloud = _cloud(3).astype(np.float64)
+    cloud[7, 1] = 1e39  # finite in float64, inf in float32
+    with pytest.raises(ValueError, match=r"points: coordinate of magnitude inf m"):
+        random_model.encode_points(cloud)
+    big = _cloud(4).astype(np.float64)
+    big[0, 0] = 3e30
+    with pytest.raises(ValueError, match=r"points: coordinate of magnitude 3e\+30 m; expected points within 1000 m"):
+        random_model.encode_points(big)
+
+
 # ------------------------------------------------------------------ shipped weights
 
 

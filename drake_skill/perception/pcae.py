@@ -61,6 +61,9 @@ DECODER_WIDTHS = (256, 256)
 NORMALIZATION_SCALE_M = 0.25
 """Fixed length (m) every centred cloud is divided by (see module docstring)."""
 
+MAX_COORDINATE_M = 1000.0
+"""Largest accepted point coordinate (m): beyond it float32 arithmetic may overflow."""
+
 DEFAULT_WEIGHTS = Path(__file__).resolve().parents[2] / "models" / "pcae.safetensors"
 """The shipped weights, trained by ``tools/train_pcae.py`` (card: ``models/pcae.json``)."""
 
@@ -82,9 +85,18 @@ def check_points(points, name: str = "points", n_points: int | None = N_POINTS) 
         raise ValueError(f"{name}: expected {n_points} points (shape (..., {n_points}, 3)), got shape {arr.shape}")
     if arr.shape[-2] == 0:
         raise ValueError(f"{name}: the cloud is empty (shape {arr.shape})")
+    if arr.ndim == 3 and arr.shape[0] == 0:
+        raise ValueError(f"{name}: the batch is empty (shape {arr.shape}); expected at least one cloud")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}: contains NaN or infinite coordinates (shape {arr.shape})")
-    return arr.astype(np.float32, copy=False)
+    with np.errstate(over="ignore"):  # a float64 beyond float32's range becomes inf, refused below
+        out = arr.astype(np.float32, copy=False)
+    # Bounded so float32 arithmetic (centring, the encoder's layers) cannot overflow.
+    big = float(np.abs(out).max())
+    if not big <= MAX_COORDINATE_M:
+        raise ValueError(f"{name}: coordinate of magnitude {big:.3g} m; expected points within "
+                         f"{MAX_COORDINATE_M:g} m of the world origin (a cloud in metres)")
+    return out
 
 
 def normalize_points(points, scale_m: float = NORMALIZATION_SCALE_M):
@@ -324,8 +336,12 @@ def load_pcae(path: str | os.PathLike = DEFAULT_WEIGHTS) -> PointCloudAutoencode
     """Loads a PCAE from a safetensors file and returns it in eval mode.
 
     Raises FileNotFoundError if ``path`` does not exist, ValueError naming the
-    file if it is not a safetensors file, misses a tensor, has an extra one,
-    or a tensor has the wrong shape or non-finite values.
+    file if it is not a safetensors file, its header describes another
+    architecture (``n_points``/``code_size`` other than 2048/128), misses a
+    tensor, has an extra one, or a tensor has the wrong shape, dtype or
+    non-finite values. Everything in the header is checked against the
+    architecture before any tensor is read, so a corrupt header cannot make
+    the loader allocate memory it describes.
     """
     from safetensors import safe_open
 
@@ -333,34 +349,43 @@ def load_pcae(path: str | os.PathLike = DEFAULT_WEIGHTS) -> PointCloudAutoencode
     if not path.is_file():
         raise FileNotFoundError(f"{path}: PCAE weights file not found (train one with tools/train_pcae.py)")
     try:
-        tensors, meta = {}, {}
         with safe_open(str(path), framework="pt") as f:
             meta = f.metadata() or {}
-            for k in f.keys():
-                tensors[k] = f.get_tensor(k)
+            shapes_in_file = {k: tuple(f.get_slice(k).get_shape()) for k in f.keys()}
+            dtypes_in_file = {k: str(f.get_slice(k).get_dtype()) for k in f.keys()}
+            for key in ("n_points", "code_size"):
+                if key in meta and meta[key] != str({"n_points": N_POINTS, "code_size": CODE_SIZE}[key]):
+                    raise _HeaderError(f"header field '{key}' is {meta[key]!r}; this PCAE architecture has "
+                                       f"n_points = {N_POINTS}, code_size = {CODE_SIZE}")
+            expected = expected_shapes(N_POINTS, CODE_SIZE)
+            missing = sorted(set(expected) - set(shapes_in_file))
+            if missing:
+                raise _HeaderError(f"missing tensor(s) {missing} (expected the {len(expected)} tensors of a PCAE)")
+            extra = sorted(set(shapes_in_file) - set(expected))
+            if extra:
+                raise _HeaderError(f"unexpected tensor(s) {extra} in a PCAE weights file")
+            for k, shape in expected.items():
+                if shapes_in_file[k] != shape:
+                    raise _HeaderError(f"tensor '{k}' has shape {shapes_in_file[k]}, expected {shape}")
+                want = "I64" if k.endswith("num_batches_tracked") else "F32"
+                if dtypes_in_file[k].upper() not in (want, {"I64": "INT64", "F32": "FLOAT32"}[want]):
+                    raise _HeaderError(f"tensor '{k}' has dtype {dtypes_in_file[k]}, expected {want}")
+            tensors = {k: f.get_tensor(k) for k in expected}
+    except _HeaderError as e:
+        raise ValueError(f"{path}: {e}") from None
     except Exception as e:  # safetensors raises SafetensorError / OSError on garbage.
         raise ValueError(f"{path}: not a readable safetensors file ({type(e).__name__}: {e})") from e
-    try:
-        n_points = int(meta.get("n_points", N_POINTS))
-        code_size = int(meta.get("code_size", CODE_SIZE))
-    except ValueError as e:
-        raise ValueError(f"{path}: bad n_points/code_size in the safetensors metadata {meta}") from e
-    expected = expected_shapes(n_points, code_size)
-    missing = sorted(set(expected) - set(tensors))
-    if missing:
-        raise ValueError(f"{path}: missing tensor(s) {missing} (expected the {len(expected)} tensors of a PCAE)")
-    extra = sorted(set(tensors) - set(expected))
-    if extra:
-        raise ValueError(f"{path}: unexpected tensor(s) {extra} in a PCAE weights file")
-    for k, shape in expected.items():
-        if tuple(tensors[k].shape) != shape:
-            raise ValueError(f"{path}: tensor '{k}' has shape {tuple(tensors[k].shape)}, expected {shape}")
-        if tensors[k].is_floating_point() and not torch.isfinite(tensors[k]).all():
+    for k, t in tensors.items():
+        if t.is_floating_point() and not torch.isfinite(t).all():
             raise ValueError(f"{path}: tensor '{k}' contains NaN or infinite values")
-    model = PointCloudAutoencoder(n_points, code_size)
+    model = PointCloudAutoencoder(N_POINTS, CODE_SIZE)
     model.load_state_dict(tensors)
     model.eval()
     return model
+
+
+class _HeaderError(Exception):
+    """A safetensors header that does not describe this PCAE (reported by load_pcae)."""
 
 
 # --------------------------------------------------------------------------- benchmark
