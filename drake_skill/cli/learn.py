@@ -1,0 +1,197 @@
+"""``drake-skill learn``: improve a skill by policy search on its learned reward (the main job).
+
+    drake-skill learn [--skill open] [--skill-dir DIR | --demos DIR] [--method pi2-es-cov]
+                      [--reward dense] [--episodes 5] [--rollouts 6] [--seed 0] [--workers 1]
+                      [--held-out 10] [--out results/learn/SKILL] [--resume] [--meshcat]
+
+The skill comes from ``--skill-dir`` (a fitted skill, ``drake-skill fit``), or
+is fitted from ``--demos`` (``drake-skill demos record``), or, with neither,
+the scripted demonstrator records the thesis' demonstrations of ``--skill``
+(3 Open, 2 Close, 2 Draw) into ``OUT/demos/`` and the skill is fitted into
+``OUT/initial_skill/`` (reused when already there). Then (docs/method.md
+section 5) the held-out greedy success over ``--held-out`` object poses, one
+greedy execution, and ``--episodes`` updates of ``--rollouts`` rollouts each,
+a greedy execution after every update, and the held-out success again.
+
+Writes into ``--out``:
+
+    config.json          the settings (``--resume`` checks them)
+    results.jsonl        one JSON object per line: held_out, greedy, rollout, episode records
+    summary.json         greedy success per episode, held-out success before/after, failures
+    learning_curve.png   greedy success and returns per episode
+    skill/               the learned skill (drake-skill evaluate --skill OUT/skill)
+    replay_first.html    Meshcat replay of the greedy execution before learning
+    replay_last.html     ... and of the last one (open in a browser, press play)
+    checkpoint/          search state after every episode (--resume continues from it)
+
+A table row per episode: greedy success (ground truth) and return, mean and
+best rollout return, exploration size (RMS standard deviation of the weight
+noise), failed rollouts by reason. ``--meshcat`` opens Meshcat (URL printed)
+and shows the greedy executions live.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from drake_skill.common import SKILLS
+
+NAME = "learn"
+HELP = "improve a skill by policy search on its learned reward (the main job)"
+
+_METHODS = ("power", "pi2", "pi2-cov", "pi2-es", "pi2-es-cov", "cma-es")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.description = __doc__
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    source = parser.add_argument_group("skill")
+    source.add_argument("--skill", choices=SKILLS, default=None,
+                        help="skill to learn (default open, or the skill of --skill-dir / --demos)")
+    source.add_argument("--skill-dir", type=Path, help="start from this fitted skill")
+    source.add_argument("--demos", type=Path, help="fit the skill from these demonstrations (demo_*.npz)")
+    search = parser.add_argument_group("policy search")
+    search.add_argument("--method", choices=_METHODS, default="pi2-es-cov", help="default: pi2-es-cov")
+    search.add_argument("--reward", choices=("dense", "sparse"), default="dense",
+                        help="dense: POMRP return (per-step rewards for pi2, pi2-cov); sparse: the "
+                             "goal model's verdict (default dense)")
+    search.add_argument("--weighting", choices=("thesis", "range"), default=None,
+                        help="rollout weighting of the PI^2 family: thesis (Eq. 5.1, exp(R/C)) or range "
+                             "(exp(h (R - min)/(max - min))); default: the method's")
+    search.add_argument("--episodes", type=int, default=5, help="updates (default 5)")
+    search.add_argument("--rollouts", type=int, default=6, help="rollouts per update (default 6)")
+    search.add_argument("--seed", type=int, default=0, help="policy search and object-pose seed (default 0)")
+    search.add_argument("--held-out", type=int, default=10,
+                        help="held-out object poses for greedy success before and after (0: off; default 10)")
+    run = parser.add_argument_group("run")
+    run.add_argument("--workers", type=int, default=1, help="rollout worker processes (default 1)")
+    run.add_argument("--ray-address", default=None,
+                     help="run rollouts on Ray actors of this cluster ('auto', 'ray://host:port'; "
+                          "needs pip install ray)")
+    run.add_argument("--ray", action="store_true", help="run rollouts on Ray actors of a local ray.init()")
+    run.add_argument("--out", type=Path, default=None, help="output folder (default results/learn/SKILL)")
+    run.add_argument("--resume", action="store_true", help="continue the interrupted run in --out")
+    run.add_argument("--force", action="store_true", help="start over in an --out that holds a run")
+    run.add_argument("--meshcat", action="store_true", help="watch the greedy executions live in Meshcat")
+    run.add_argument("--no-replay", action="store_true", help="do not write the Meshcat HTML replays")
+    run.add_argument("--ground-truth-pose", action="store_true",
+                     help="object frame from the simulator's ground truth instead of the segmenter")
+    run.add_argument("--station-config", type=Path, help="StationConfig YAML (default: the skill's scenario)")
+    run.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _station_config(args, skill_name: str):
+    from drake_skill.station.config import load_station_config, scenario_for_skill
+
+    if args.station_config is None:
+        return scenario_for_skill(skill_name)
+    return load_station_config(args.station_config, defaults=scenario_for_skill(skill_name))
+
+
+def _save_demos(demos, directory: Path) -> None:
+    from drake_skill.demos import format as demo_format
+
+    if hasattr(demo_format, "save_demonstrations"):
+        demo_format.save_demonstrations(demos, directory, force=True)
+    else:  # pragma: no cover - older demos package
+        for i, demo in enumerate(demos):
+            demo_format.save_demonstration(demo, demo_format.demo_path(directory, i), force=True)
+
+
+def prepare_skill(args, out: Path) -> Path:
+    """The fitted skill's directory: --skill-dir, fitted from --demos, or recorded and fitted."""
+    from drake_skill.skill import Skill, default_skill_config, fit_skill
+
+    if args.skill_dir is not None and args.demos is not None:
+        raise ValueError("give --skill-dir or --demos, not both")
+    if args.skill_dir is not None:
+        skill = Skill.load(args.skill_dir)      # errors name the file
+        if args.skill is not None and args.skill != skill.name:
+            raise ValueError(f"--skill {args.skill} but {args.skill_dir} holds a '{skill.name}' skill")
+        return args.skill_dir
+    initial = out / "initial_skill"
+    if (initial / "skill.json").is_file() and args.demos is None:
+        skill = Skill.load(initial)
+        if args.skill is not None and args.skill != skill.name:
+            raise ValueError(f"{initial} holds a '{skill.name}' skill, not '{args.skill}'; use another --out")
+        print(f"using the skill fitted earlier: {initial}")
+        return initial
+    from drake_skill.demos.format import load_demonstrations
+
+    if args.demos is not None:
+        demos = load_demonstrations(args.demos)
+        if not demos:
+            raise FileNotFoundError(f"{args.demos}: no demo_*.npz files; record some with "
+                                    "'drake-skill demos record'")
+        name = demos[0].skill
+        if args.skill is not None and args.skill != name:
+            raise ValueError(f"--skill {args.skill} but {args.demos} holds '{name}' demonstrations")
+    else:
+        from drake_skill.demos.demonstrator import ScriptedDemonstrator
+
+        name = args.skill or "open"
+        print(f"recording scripted demonstrations of '{name}' into {out / 'demos'} ...")
+        demonstrator = ScriptedDemonstrator(name, station_config=_station_config(args, name))
+        demos = demonstrator.record_many(progress=not args.quiet)
+        _save_demos(demos, out / "demos")
+    print(f"fitting '{name}' from {len(demos)} demonstrations ...")
+    skill = fit_skill(demos, default_skill_config(name))
+    skill.save(initial, overwrite=True)
+    print(skill.summary())
+    return initial
+
+
+def run(args: argparse.Namespace) -> int:
+    from drake_skill.learning.loop import LearnConfig, learn
+    from drake_skill.learning.rollout import RolloutConfig
+    from drake_skill.skill import Skill
+
+    for name in ("episodes", "rollouts", "workers"):
+        if getattr(args, name) < 1:
+            raise ValueError(f"--{name} must be at least 1, got {getattr(args, name)}")
+    if args.held_out < 0:
+        raise ValueError(f"--held-out must be 0 (off) or a number of poses, got {args.held_out}")
+    if args.resume and args.force:
+        raise ValueError("--resume continues a run and --force starts over: give one of them")
+    guessed = args.skill or (Skill.load(args.skill_dir).name if args.skill_dir else None)
+    out = args.out if args.out is not None else Path("results") / "learn" / (guessed or "open")
+    if args.out is None and guessed is None and args.demos is not None:
+        from drake_skill.demos.format import load_demonstrations
+        demos = load_demonstrations(args.demos)
+        out = Path("results") / "learn" / (demos[0].skill if demos else "open")
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"--out {out} is a file; give a folder")
+    if (out / "checkpoint" / "state.json").exists() and not (args.resume or args.force):
+        raise FileExistsError(f"{out} holds a learning run; pass --resume to continue it, --force to "
+                              "start over, or choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    skill_dir = prepare_skill(args, out)
+    skill_name = Skill.load(skill_dir).name
+    config = LearnConfig(method=args.method, reward=args.reward, weighting=args.weighting or "",
+                         episodes=args.episodes, rollouts=args.rollouts, seed=args.seed,
+                         held_out=args.held_out)
+    rollout = RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived")
+    meshcat = None
+    if args.meshcat:
+        from pydrake.geometry import Meshcat
+        meshcat = Meshcat()
+        print(f"Meshcat: {meshcat.web_url()}")
+    outcome = learn(skill_dir, out, config, station_config=_station_config(args, skill_name),
+                    rollout_config=rollout, workers=args.workers, ray_address=args.ray_address,
+                    use_ray=args.ray, resume=args.resume, force=args.force, meshcat=meshcat,
+                    replay=not args.no_replay, progress=not args.quiet)
+    s = outcome.summary
+    before, after = s.get("held_out_before"), s.get("held_out_after")
+    if before is not None:
+        print(f"held-out greedy success: {before * 100:.0f} % before, {after * 100:.0f} % after learning "
+              f"({config.held_out} poses)")
+    print(f"wrote {out}/ ({', '.join(s['artifacts'])})")
+    return 0
+
+
+def main(argv=None) -> int:
+    """Stand-alone entry (the dispatcher normally calls add_arguments / run)."""
+    parser = argparse.ArgumentParser(prog="drake-skill learn")
+    add_arguments(parser)
+    return run(parser.parse_args(argv))

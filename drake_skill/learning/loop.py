@@ -1,0 +1,544 @@
+"""The learning run: policy search on the learned reward, with greedy and held-out evaluation.
+
+docs/method.md section 5, docs/architecture.md "The outer loop"::
+
+    search = make_policy_search(method, W0, Sigma0, seed=seed)
+    held-out greedy success of W0 over N poses           (before learning)
+    greedy execution of W0                               (episode 0)
+    for e in 1..E:
+        samples = search.ask(C)                          # (C, B, 7)
+        results = pool.map(samples, pose seeds of episode e)
+        search.tell(samples, returns or per-step rewards)
+        greedy execution of search.mean                  (episode e)
+        checkpoint
+    held-out greedy success of the final mean            (after learning)
+
+Returns (docs/method.md sections 4-5): ``reward="dense"`` uses the POMRP
+return R(G) (thesis Eq. 4.5) for the black-box methods and the filtered
+per-step rewards for :data:`~drake_skill.learning.policy_search.PER_STEP_METHODS`;
+``reward="sparse"`` the goal model's verdict (1 or 0; per step: at the last
+step). A failed rollout counts with reward 0 and is reported with its reason.
+
+Seeds: the policy search draws from ``seed``; rollout ``c`` of episode ``e``
+and the greedy execution after update ``e`` place the object at poses drawn
+from seeds derived from ``(seed, e, c)`` (:func:`pose_seed`); the held-out
+poses are the seeds ``held_out_seed0 + i`` (the same for every run, none of
+them a demonstration's or a training rollout's in practice).
+
+Artifacts in the output directory (:data:`ARTIFACTS`), all written
+atomically: ``config.json``, ``results.jsonl`` (one JSON object per line:
+``held_out``, ``greedy``, ``rollout`` and ``episode`` records),
+``summary.json``, ``learning_curve.png``, ``skill/`` (the learned skill),
+``replay_first.html`` / ``replay_last.html`` (Meshcat replays of the first
+and last greedy executions) and ``checkpoint/`` (``search.npz`` + ``state.json``,
+written after every episode; :func:`learn` with ``resume=True`` continues
+from it to the result an uninterrupted run gives).
+
+This module imports no Drake at import time; the pools and the Meshcat
+replays import it when used.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import json
+import math
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from drake_skill.fileio import atomic_save_npz, atomic_write_json, atomic_write_text, load_npz
+from drake_skill.learning.policy_search import METHODS, PER_STEP_METHODS, make_policy_search, policy_search_from_state
+
+__all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "LearnConfig", "LearnOutcome", "episode_rewards", "evaluate_greedy",
+           "evaluate_skill", "evaluation_table",
+           "frame_meshcat_camera", "learn", "plot_learning_curve", "pose_seed"]
+
+#: First seed of the held-out object poses (drake-skill evaluate uses the same).
+HELD_OUT_SEED0 = 900_000
+
+#: What a learning run writes into its output directory.
+ARTIFACTS = ("config.json", "results.jsonl", "summary.json", "learning_curve.png", "skill/",
+             "replay_first.html", "replay_last.html", "checkpoint/")
+
+REWARDS = ("dense", "sparse")
+_CHECKPOINT_FORMAT = 1
+
+
+@dc.dataclass
+class LearnConfig:
+    """What decides a learning run's numbers (saved in ``config.json``; resume checks it).
+
+    method: one of ``policy_search.METHODS`` (default PI^2-ES-Cov, thesis 5.2).
+    reward: "dense" (POMRP return / per-step rewards) or "sparse" (verdict).
+    weighting: "" (the method's default: "thesis" for PI^2-ES(-Cov), "range"
+      for PI^2(-Cov)), "thesis" (Eq. 5.1) or "range"; only the PI^2 family.
+    episodes, rollouts: E updates of C rollouts (thesis budget 5 x 6).
+    seed: policy search and pose seeds.
+    held_out: greedy success over this many held-out poses before and after
+      learning (0: off); held_out_seed0: their first seed.
+    """
+
+    method: str = "pi2-es-cov"
+    reward: str = "dense"
+    weighting: str = ""
+    episodes: int = 5
+    rollouts: int = 6
+    seed: int = 0
+    held_out: int = 10
+    held_out_seed0: int = HELD_OUT_SEED0
+
+    def validate(self) -> "LearnConfig":
+        def bad(field, value, expected):
+            raise ValueError(f"learn config field '{field}' = {value!r}: expected {expected}")
+
+        if self.method not in METHODS:
+            bad("method", self.method, f"one of {', '.join(METHODS)}")
+        if self.reward not in REWARDS:
+            bad("reward", self.reward, "'dense' or 'sparse'")
+        if self.weighting not in ("", "thesis", "range"):
+            bad("weighting", self.weighting, "'' (method default), 'thesis' or 'range'")
+        if self.weighting and self.method in ("power", "cma-es"):
+            bad("weighting", self.weighting, f"'' for {self.method} (it has no rollout weighting)")
+        if int(self.episodes) < 1:
+            bad("episodes", self.episodes, "at least 1")
+        min_rollouts = 2 if self.method == "cma-es" else 1
+        if int(self.rollouts) < min_rollouts:
+            bad("rollouts", self.rollouts, f"at least {min_rollouts} per episode for {self.method}")
+        if int(self.held_out) < 0:
+            bad("held_out", self.held_out, "0 (off) or a number of poses")
+        return self
+
+    def search_options(self) -> dict[str, Any]:
+        options: dict[str, Any] = {"n_episodes": int(self.episodes), "seed": int(self.seed)}
+        if self.weighting:
+            options["weighting"] = self.weighting
+        return options
+
+
+def pose_seed(run_seed: int, episode: int, index: int | None = None) -> int:
+    """Object-pose seed of rollout ``index`` of episode ``episode`` (1-based), or,
+    with ``index=None``, of the greedy execution after that episode's update
+    (episode 0: before learning). A 31-bit integer from ``numpy.random.SeedSequence``."""
+    key = [int(run_seed), int(episode), 0 if index is None else 1, 0 if index is None else int(index)]
+    return int(np.random.SeedSequence(key).generate_state(1)[0] >> 1)
+
+
+def episode_rewards(results, reward: str, per_step: bool) -> np.ndarray:
+    """What ``tell`` takes from an episode's results: returns ``(C,)`` or per-step ``(C, T)``.
+
+    dense: R(G) (Eq. 4.5) / the filtered per-step rewards (zero-padded to the
+    longest rollout); sparse: the verdict as 1/0 (per step: at the last step).
+    Failed rollouts count 0.
+    """
+    if not per_step:
+        if reward == "dense":
+            return np.array([0.0 if r.failed else float(r.dense_return) for r in results])
+        return np.array([0.0 if r.failed else float(r.verdict) for r in results])
+    length = max([len(r.filtered_rewards) for r in results] + [1])
+    out = np.zeros((len(results), length))
+    for i, r in enumerate(results):
+        if r.failed:
+            continue
+        if reward == "dense":
+            out[i, :len(r.filtered_rewards)] = r.filtered_rewards
+        else:
+            out[i, -1] = float(r.verdict)
+    return out
+
+
+def evaluate_greedy(pool, weights, seeds, progress: Callable | None = None) -> tuple[dict[str, Any], list]:
+    """Greedy executions of ``weights`` on the poses of ``seeds``: (report, results).
+
+    report: ``success_rate`` (ground truth), ``successes``, ``verdicts``,
+    ``returns``, ``final_object_state``, ``failures`` (reason -> count), ``seeds``.
+    """
+    seeds = [int(s) for s in seeds]
+    results = pool.map([(weights, s) for s in seeds], progress)
+    report = {
+        "seeds": seeds,
+        "success_rate": float(np.mean([r.success for r in results])) if results else float("nan"),
+        "successes": [bool(r.success) for r in results],
+        "verdicts": [bool(r.verdict) for r in results],
+        "returns": [float(r.dense_return) for r in results],
+        "final_object_state": [None if not math.isfinite(r.final_object_state) else float(r.final_object_state)
+                               for r in results],
+        "failures": dict(Counter(r.reason for r in results if r.failed)),
+        "ik_warnings": int(sum(r.ik_warnings for r in results)),
+    }
+    return report, results
+
+
+def exploration_size(search) -> float:
+    """RMS standard deviation of the sampling distribution: sqrt(mean_b trace(s Sigma_b) / D)."""
+    cov = search.sampling_covariances
+    return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2)) / cov.shape[-1]))
+
+
+def frame_meshcat_camera(meshcat, object_xyz) -> None:
+    """Points Meshcat's camera at the robot and the object (robot base at the world origin)."""
+    target = 0.5 * np.asarray(object_xyz, dtype=float) + np.array([0.0, 0.0, 0.25])   # between base and object
+    meshcat.SetCameraPose(target + np.array([0.9, -1.3, 0.55]), target)
+
+
+def plot_learning_curve(curve: list[dict], path, title: str = "") -> Path:
+    """Greedy success and returns per episode (0 = before learning) to a PNG."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from drake_skill.fileio import write_figure_png
+
+    episodes = [c["episode"] for c in curve]
+    fig, (ax_s, ax_r) = plt.subplots(1, 2, figsize=(10, 3.8))
+    ax_s.plot(episodes, [float(c["greedy_success"]) for c in curve], "o-", color="tab:green")
+    ax_s.set_ylim(-0.05, 1.05)
+    ax_s.set_xlabel("episode (update)")
+    ax_s.set_ylabel("greedy success (ground truth)")
+    ax_s.set_xticks(episodes)
+    ax_r.plot(episodes, [c["greedy_return"] for c in curve], "o-", label="greedy return")
+    learned = [c for c in curve if c.get("mean_return") is not None]
+    if learned:
+        ax_r.plot([c["episode"] for c in learned], [c["mean_return"] for c in learned], "s--", label="mean rollout return")
+        ax_r.plot([c["episode"] for c in learned], [c["best_return"] for c in learned], "^:", label="best rollout return")
+    ax_r.set_xlabel("episode (update)")
+    ax_r.set_ylabel("learned return R(G)")
+    ax_r.set_xticks(episodes)
+    ax_r.legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    try:
+        return write_figure_png(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
+
+
+@dc.dataclass
+class LearnOutcome:
+    """What :func:`learn` returns: the summary (also in ``summary.json``) and paths."""
+
+    summary: dict
+    out_dir: Path
+    complete: bool
+    search: Any = None
+
+
+class _Replay:
+    """Meshcat recordings of greedy executions, saved as standalone HTML."""
+
+    def __init__(self, meshcat, live: bool):
+        self.meshcat = meshcat
+        self.live = live
+
+    def run(self, runner, weights, seed, path: Path | None):
+        if path is None:
+            return runner.run(weights, seed)
+        frame_meshcat_camera(self.meshcat, runner.station.random_object_pose(seed).translation())
+        self.meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=self.live)
+        try:
+            result = runner.run(weights, seed)
+        finally:
+            self.meshcat.StopRecording()
+        self.meshcat.PublishRecording()
+        atomic_write_text(path, self.meshcat.StaticHtml())
+        self.meshcat.DeleteRecording()
+        return result
+
+
+def _jsonl(records) -> str:
+    return "".join(json.dumps(r, sort_keys=True) + "\n" for r in records)
+
+
+def _print(*args, file=None):
+    print(*args, file=file or sys.stdout, flush=True)
+
+
+def _table_header() -> str:
+    return (f"{'episode':>7}  {'greedy':>7}  {'greedy R':>8}  {'mean R':>8}  {'best R':>8}  "
+            f"{'explore':>8}  {'fail':>4}  failures")
+
+
+def _table_row(row: dict) -> str:
+    fmt = lambda v: f"{v:8.1f}" if v is not None else f"{'-':>8}"  # noqa: E731
+    failures = ", ".join(f"{k} {v}" for k, v in sorted(row.get("failures", {}).items())) or "-"
+    n_fail = sum(row.get("failures", {}).values())
+    return (f"{row['episode']:>7}  {'success' if row['greedy_success'] else 'failure':>7}  "
+            f"{fmt(row['greedy_return'])}  {fmt(row.get('mean_return'))}  {fmt(row.get('best_return'))}  "
+            f"{row['exploration']:8.4f}  {n_fail:>4}  {failures}")
+
+
+def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_config=None,
+          rollout_config=None, workers: int = 1, ray_address: str | None = None, use_ray: bool = False,
+          resume: bool = False, force: bool = False, meshcat=None, replay: bool = True,
+          progress: bool = True, stop_after: int | None = None, log=None) -> LearnOutcome:
+    """Runs (or resumes) a learning run of the skill in ``skill_dir``; see the module docstring.
+
+    station_config: the scenario (default ``scenario_for_skill``); rollout_config:
+    :class:`~drake_skill.learning.rollout.RolloutConfig`; workers / ray_address /
+    use_ray: where rollouts run (:func:`~drake_skill.learning.workers.make_pool`;
+    they do not change the numbers); meshcat: watch live (greedy executions
+    run in this process then); replay: write the HTML replays; stop_after:
+    return after this many episodes in this call (checkpointed; ``resume``
+    continues); log: a text stream for the tables (default stdout).
+    """
+    from pydrake.common.yaml import yaml_dump_typed
+
+    from drake_skill.learning.rollout import RolloutConfig
+    from drake_skill.learning.workers import RunnerSpec, make_pool
+    from drake_skill.skill import Skill
+    from drake_skill.station.config import scenario_for_skill
+
+    config = (config or LearnConfig()).validate()
+    out_dir = Path(out_dir)
+    skill_dir = Path(skill_dir)
+    skill = Skill.load(skill_dir)
+    station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
+    rollout_config = (rollout_config or RolloutConfig()).validate()
+    run_config = {"learn": dc.asdict(config), "skill": skill.name, "skill_dir": str(skill_dir.resolve()),
+                  "station": yaml_dump_typed(station_config), "rollout": dc.asdict(rollout_config)}
+    checkpoint = out_dir / "checkpoint"
+    stream = log or sys.stdout
+
+    # ----------------------------------------------------------- fresh or resumed
+    if resume:
+        if not (checkpoint / "state.json").is_file():
+            raise FileNotFoundError(f"{checkpoint}: no checkpoint to resume (state.json missing); "
+                                    "run without --resume to start")
+        state = json.loads((checkpoint / "state.json").read_text())
+        saved = json.loads((out_dir / "config.json").read_text())
+        if saved != run_config:
+            changed = sorted(k for k in set(saved) | set(run_config) if saved.get(k) != run_config.get(k))
+            raise ValueError(f"{out_dir}: --resume with different settings than the run it continues "
+                             f"({', '.join(changed)} differ); use the same options or another --out")
+        search = policy_search_from_state(load_npz(checkpoint / "search.npz"))
+        records, curve = state["records"], state["curve"]
+        held_out_before = state.get("held_out_before")
+        _print(f"resuming {out_dir} after episode {search.episode} of {config.episodes}", file=stream)
+    else:
+        if (checkpoint / "state.json").exists() and not force:
+            raise FileExistsError(f"{out_dir} holds a learning run (checkpoint/); pass --resume to continue "
+                                  "it, --force to start over, or choose another --out")
+        out_dir.mkdir(parents=True, exist_ok=True)
+        for name in ("results.jsonl", "summary.json", "learning_curve.png", "replay_first.html",
+                     "replay_last.html"):
+            (out_dir / name).unlink(missing_ok=True)
+        atomic_write_json(out_dir / "config.json", run_config)
+        search = make_policy_search(config.method, skill.initial_weights, skill.sigma0,
+                                    **config.search_options())
+        records, curve, held_out_before = [], [], None
+    per_step = config.method in PER_STEP_METHODS
+    weighting = search.state_dict().get("option_weighting")   # the method's default when not given
+    weighting = None if weighting is None else str(weighting)
+
+    # ----------------------------------------------------------- pools and replays
+    spec = RunnerSpec.create(skill_dir, station_config, rollout_config)
+    viewer = None
+    live = meshcat is not None
+    if live or replay:
+        from pydrake.geometry import Meshcat
+
+        view_meshcat = meshcat if live else Meshcat()
+        if not live:
+            view_meshcat.Delete()
+        viewer = spec.build(meshcat=view_meshcat)
+        replayer = _Replay(view_meshcat, live)
+        if live:
+            frame_meshcat_camera(view_meshcat, station_config_object_xyz(station_config))
+    local_runner = viewer if (live and int(workers) == 1 and not (use_ray or ray_address)) else None
+    pool = make_pool(spec, workers, ray_address, use_ray, runner=local_runner)
+    wall_start = time.perf_counter()
+
+    def bar(total, desc):
+        from tqdm import tqdm
+        return tqdm(total=total, desc=desc, unit="rollout", disable=not progress, leave=False, file=sys.stderr)
+
+    def greedy(episode: int) -> dict:
+        seed = pose_seed(config.seed, episode, None)
+        path = None
+        if replay and episode == 0:
+            path = out_dir / "replay_first.html"
+        elif replay and episode == config.episodes:
+            path = out_dir / "replay_last.html"
+        mean = search.mean
+        if viewer is not None and (live or path is not None):
+            result = replayer.run(viewer, mean, seed, path)
+        else:
+            result = pool.run(mean, seed)
+        record = {"type": "greedy", "episode": episode, **result.summary()}
+        records.append(record)
+        return record
+
+    def held_out(phase: str) -> dict | None:
+        if config.held_out <= 0:
+            return None
+        seeds = [config.held_out_seed0 + i for i in range(config.held_out)]
+        b = bar(len(seeds), f"held-out poses ({phase})")
+        try:
+            report, _ = evaluate_greedy(pool, search.mean, seeds, lambda i, r: b.update(1))
+        finally:
+            b.close()
+        record = {"type": "held_out", "phase": phase, "episode": search.episode, **report}
+        records.append(record)
+        _print(f"held-out greedy success {phase} learning: {report['success_rate'] * 100:.0f} % of "
+               f"{len(seeds)} poses", file=stream)
+        return record
+
+    def save_checkpoint() -> None:
+        state = search.state_dict()
+        atomic_save_npz(checkpoint / "search.npz", {k: np.asarray(v) for k, v in state.items()})
+        atomic_write_json(checkpoint / "state.json", {
+            "format": _CHECKPOINT_FORMAT, "episode": search.episode, "records": records, "curve": curve,
+            "held_out_before": held_out_before})
+        atomic_write_text(out_dir / "results.jsonl", _jsonl(records))
+
+    try:
+        if not resume:
+            held_out_before = held_out("before")
+            g = greedy(0)
+            row = {"episode": 0, "greedy_success": g["success"], "greedy_return": g["dense_return"],
+                   "greedy_verdict": g["verdict"], "mean_return": None, "best_return": None,
+                   "exploration": exploration_size(search), "failures": {}}
+            curve.append(row)
+            _print(f"{skill.name}: {config.method}, {config.reward} reward, weighting {weighting or '-'}, "
+                   f"{config.episodes} episodes x {config.rollouts} rollouts, {pool.n_workers} worker(s)",
+                   file=stream)
+            _print(_table_header(), file=stream)
+            _print(_table_row(row), file=stream)
+            save_checkpoint()
+        else:
+            _print(_table_header(), file=stream)
+            for row in curve:
+                _print(_table_row(row), file=stream)
+        ran = 0
+        while search.episode < config.episodes:
+            if stop_after is not None and ran >= stop_after:
+                return LearnOutcome({"interrupted_after_episode": search.episode}, out_dir, False, search)
+            episode = search.episode + 1
+            exploration = exploration_size(search)
+            samples = search.ask(config.rollouts)
+            seeds = [pose_seed(config.seed, episode, c) for c in range(config.rollouts)]
+            b = bar(len(seeds), f"episode {episode}/{config.episodes}")
+            try:
+                results = pool.map(list(zip(samples, seeds)), lambda i, r: b.update(1))
+            finally:
+                b.close()
+            values = episode_rewards(results, config.reward, per_step)
+            search.tell(samples, values)
+            returns = episode_rewards(results, config.reward, False)
+            for c, r in enumerate(results):
+                records.append({"type": "rollout", "episode": episode, "index": c,
+                                "reward": float(returns[c]), **r.summary()})
+            g = greedy(episode)
+            failures = dict(Counter(r.reason for r in results if r.failed))
+            row = {"episode": episode, "greedy_success": g["success"], "greedy_return": g["dense_return"],
+                   "greedy_verdict": g["verdict"], "mean_return": float(np.mean(returns)),
+                   "best_return": float(np.max(returns)), "exploration": exploration, "failures": failures,
+                   "rollout_successes": int(sum(r.success for r in results)),
+                   "ik_warnings": int(sum(r.ik_warnings for r in results))}
+            curve.append(row)
+            records.append({"type": "episode", **row})
+            _print(_table_row(row), file=stream)
+            save_checkpoint()
+            ran += 1
+
+        held_out_after = held_out("after")
+        atomic_write_text(out_dir / "results.jsonl", _jsonl(records))
+        # The learned skill: the initial DMP's weights replaced by the final mean.
+        learned = dc.replace(skill, dmps=list(skill.dmps), info=dict(skill.info))
+        learned.dmps[skill.initial_index] = dc.replace(skill.initial_dmp, weights=search.mean)
+        learned.info["learning"] = {"method": config.method, "reward": config.reward,
+                                    "weighting": weighting, "episodes": config.episodes,
+                                    "rollouts": config.rollouts, "seed": config.seed,
+                                    "initial_skill": str(skill_dir.resolve())}
+        learned.save(out_dir / "skill", overwrite=True)
+        plot_learning_curve(curve, out_dir / "learning_curve.png",
+                            title=f"{skill.name}: {config.method}, {config.reward} reward")
+        summary = {
+            "skill": skill.name, "method": config.method, "reward": config.reward, "weighting": weighting,
+            "episodes": config.episodes, "rollouts": config.rollouts, "seed": config.seed,
+            "workers": pool.n_workers, "curve": curve,
+            "greedy_success": [bool(c["greedy_success"]) for c in curve],
+            "held_out_before": None if held_out_before is None else held_out_before["success_rate"],
+            "held_out_after": None if held_out_after is None else held_out_after["success_rate"],
+            "failures": dict(sum((Counter(c["failures"]) for c in curve), Counter())),
+            "n_rollouts": config.episodes * config.rollouts,
+            "wall_s_this_call": round(time.perf_counter() - wall_start, 1),
+            "artifacts": [a for a in ARTIFACTS if (out_dir / a.rstrip("/")).exists() or a == "summary.json"],
+        }
+        atomic_write_json(out_dir / "summary.json", summary)
+        return LearnOutcome(summary, out_dir, True, search)
+    finally:
+        pool.close()
+
+
+def station_config_object_xyz(station_config) -> np.ndarray:
+    """Nominal object position of a StationConfig [m]."""
+    o = station_config.object
+    return np.array([o.x, o.y, 0.0])
+
+
+def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, station_config=None,
+                   rollout_config=None, workers: int = 1, ray_address: str | None = None,
+                   all_demos: bool = False, progress: bool = True) -> dict[str, Any]:
+    """Greedy success of a skill (initial or learned) over ``poses`` held-out object poses.
+
+    Executes the skill's policy (its initial DMP, the learned one in a skill
+    written by :func:`learn`; with ``all_demos`` each demonstration's DMP)
+    on the poses of seeds ``seed0 .. seed0 + poses - 1`` and judges each from
+    the simulator's ground truth. Returns a JSON-able report: per policy
+    (key = DMP index) the :func:`evaluate_greedy` report, plus the settings.
+    """
+    from drake_skill.learning.rollout import RolloutConfig
+    from drake_skill.learning.workers import RunnerSpec, make_pool
+    from drake_skill.skill import Skill
+    from drake_skill.station.config import scenario_for_skill
+
+    if int(poses) < 1:
+        raise ValueError(f"poses: expected at least 1 held-out pose, got {poses}")
+    skill = Skill.load(skill_dir)
+    station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
+    rollout_config = (rollout_config or RolloutConfig()).validate()
+    seeds = [int(seed0) + i for i in range(int(poses))]
+    indices = range(len(skill.dmps)) if all_demos else [skill.initial_index]
+    report: dict[str, Any] = {"skill": skill.name, "skill_dir": str(Path(skill_dir)),
+                              "object_pose": rollout_config.object_pose, "seeds": seeds,
+                              "learned": "learning" in skill.info, "initial_index": skill.initial_index,
+                              "policies": {}}
+    start = time.perf_counter()
+    spec = RunnerSpec.create(skill_dir, station_config, rollout_config)
+    with make_pool(spec, workers, ray_address) as pool:
+        for index in indices:
+            from tqdm import tqdm
+            bar = tqdm(total=len(seeds), desc=f"DMP {index}", unit="rollout", disable=not progress,
+                       leave=False, file=sys.stderr)
+            try:
+                policy, _ = evaluate_greedy(pool, skill.dmps[index].weights, seeds, lambda i, r: bar.update(1))
+            finally:
+                bar.close()
+            policy["initial"] = index == skill.initial_index
+            report["policies"][str(index)] = policy
+    report["success_rate"] = report["policies"][str(skill.initial_index)]["success_rate"] \
+        if str(skill.initial_index) in report["policies"] else None
+    report["wall_s"] = round(time.perf_counter() - start, 1)
+    return report
+
+
+def evaluation_table(report: dict[str, Any]) -> str:
+    """The people's view of :func:`evaluate_skill`'s report."""
+    lines = [f"{'policy':<22}{'success':>9}{'verdict':>9}{'mean R':>9}{'final state':>20}  failures"]
+    for index, p in report["policies"].items():
+        finals = [v for v in p["final_object_state"] if v is not None]
+        spread = f"{np.median(finals):.2f} ({min(finals):.2f}..{max(finals):.2f})" if finals else "-"
+        name = f"DMP {index}" + (" (learned)" if p["initial"] and report.get("learned") else
+                                 " (initial)" if p["initial"] else "")
+        failures = ", ".join(f"{k} {v}" for k, v in sorted(p["failures"].items())) or "-"
+        lines.append(f"{name:<22}{p['success_rate'] * 100:>8.0f}%{np.mean(p['verdicts']) * 100:>8.0f}%"
+                     f"{np.mean(p['returns']):>9.1f}{spread:>20}  {failures}")
+    lines.append(f"{report['skill']}: {len(report['seeds'])} held-out poses (seeds {report['seeds'][0]}.."
+                 f"{report['seeds'][-1]}), object frame {report['object_pose']}, {report['wall_s']} s")
+    return "\n".join(lines)

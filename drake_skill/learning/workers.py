@@ -1,0 +1,376 @@
+"""Rollouts in parallel: persistent worker processes (or Ray actors), each owning one built diagram.
+
+A Drake diagram and its context cannot be pickled, so a worker builds its own
+:class:`~drake_skill.learning.rollout.RolloutRunner` once, from a
+:class:`RunnerSpec` of plain data (the skill's directory, the station
+configuration as YAML, the rollout configuration), and then receives only
+``(weights, seed)`` per rollout and sends back the
+:class:`~drake_skill.learning.rollout.RolloutResult`. A rollout's numbers
+depend only on ``(weights, seed)`` (the runner resets its context to the
+defaults every time), so the same seeds give the same results serially, on
+the process pool and on Ray, whichever worker runs which rollout.
+
+    spec = RunnerSpec.create("skills/open", station_config, RolloutConfig())
+    with make_pool(spec, workers=2) as pool:
+        results = pool.map([(W1, 11), (W2, 12)])          # in task order
+
+- :class:`SerialPool`: one runner in this process (``workers=1``).
+- :class:`ProcessPool`: ``workers`` processes started with ``spawn`` (no
+  fork of a process holding Drake, VTK and torch threads), each with one
+  thread for numpy/BLAS/torch; tasks go to whichever worker is free. A
+  worker that dies mid-rollout is replaced and its rollout recorded as
+  failed (reason ``error``).
+- :class:`RayPool`: one Ray actor per worker (``pip install ray``): an
+  existing cluster (``ray_address``) or a local ``ray.init()``.
+
+Messages between processes use multiprocessing's (or Ray's) own pickling
+of this package's plain dataclasses and numpy arrays, between processes of
+one run; nothing read from disk is unpickled.
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import logging
+import multiprocessing
+import os
+from collections.abc import Callable, Sequence
+from multiprocessing.connection import wait
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from drake_skill.learning.rollout import RolloutConfig, RolloutResult, RolloutRunner
+
+__all__ = ["ProcessPool", "RayPool", "RunnerSpec", "SerialPool", "make_pool", "ray_available"]
+
+#: Environment of a worker process: one thread per numerical library, so N
+#: workers on N cores do not oversubscribe them.
+_WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+
+Task = tuple[np.ndarray, int]
+Progress = Callable[[int, RolloutResult], None]
+
+
+@dc.dataclass(frozen=True)
+class RunnerSpec:
+    """Plain data a worker builds its :class:`RolloutRunner` from.
+
+    skill_dir: a saved :class:`~drake_skill.skill.Skill`; station_yaml: the
+    ``StationConfig`` as YAML (``yaml_dump_typed``); rollout: the
+    ``RolloutConfig`` fields; quiet_ik: drop differential IK's warnings in
+    the worker after counting them (the main process reports the counts).
+    """
+
+    skill_dir: str
+    station_yaml: str
+    rollout: dict
+    quiet_ik: bool = True
+
+    @classmethod
+    def create(cls, skill_dir, station_config, rollout_config: RolloutConfig | None = None,
+               quiet_ik: bool = True) -> "RunnerSpec":
+        from pydrake.common.yaml import yaml_dump_typed
+
+        if not (Path(skill_dir) / "skill.json").is_file():
+            raise FileNotFoundError(f"{skill_dir}: no skill.json (workers load the skill from a saved "
+                                    "skill directory; save it first)")
+        rollout_config = (rollout_config or RolloutConfig()).validate()
+        return cls(str(Path(skill_dir).resolve()), yaml_dump_typed(station_config),
+                   dc.asdict(rollout_config), quiet_ik)
+
+    def build(self, meshcat=None) -> RolloutRunner:
+        from pydrake.common.yaml import yaml_load_typed
+
+        from drake_skill.skill import Skill
+        from drake_skill.station.config import StationConfig
+
+        station_config = yaml_load_typed(schema=StationConfig, data=self.station_yaml,
+                                         defaults=StationConfig())
+        return RolloutRunner(Skill.load(self.skill_dir), station_config, RolloutConfig(**self.rollout),
+                             meshcat=meshcat)
+
+
+class _Pool:
+    """Common interface: ``map(tasks, progress)`` -> results in task order."""
+
+    n_workers: int = 1
+
+    def map(self, tasks: Sequence[Task], progress: Progress | None = None) -> list[RolloutResult]:
+        raise NotImplementedError
+
+    def run(self, weights, seed: int) -> RolloutResult:
+        return self.map([(weights, seed)])[0]
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class SerialPool(_Pool):
+    """Rollouts one after another on one runner in this process."""
+
+    def __init__(self, runner: RolloutRunner):
+        self.runner = runner
+        self.n_workers = 1
+
+    def map(self, tasks, progress=None):
+        results = []
+        for i, (weights, seed) in enumerate(tasks):
+            results.append(self.runner.run(weights, int(seed)))
+            if progress is not None:
+                progress(i, results[-1])
+        return results
+
+
+# ------------------------------------------------------------------------ processes
+def _quiet_ik() -> None:
+    class _Drop(logging.Filter):
+        def filter(self, record):
+            return "Differential IK" not in record.getMessage()
+
+    logging.getLogger("drake").addFilter(_Drop())
+
+
+def _worker_main(spec: RunnerSpec, connection) -> None:
+    """A worker process: build the runner, then serve (index, weights, seed) until None."""
+    try:
+        if spec.quiet_ik:
+            _quiet_ik()
+        runner = spec.build()
+        connection.send(("ready", None))
+    except BaseException as error:  # report why the worker could not start
+        connection.send(("error", f"{type(error).__name__}: {error}"))
+        return
+    while True:
+        try:
+            message = connection.recv()
+        except EOFError:
+            return
+        if message is None:
+            return
+        index, weights, seed = message
+        try:
+            result = runner.run(weights, seed)
+        except BaseException as error:  # a wrong task (shape); keep serving
+            result = RolloutResult(seed=int(seed), failed=True, reason="error",
+                                   message=f"{type(error).__name__}: {error}"[:500])
+        connection.send(("result", (index, result)))
+
+
+class ProcessPool(_Pool):
+    """``n_workers`` persistent worker processes (``spawn``), one runner each.
+
+    Workers start (and build their diagrams) in the constructor; it returns
+    when all are ready, or raises RuntimeError with the first worker's error.
+    """
+
+    def __init__(self, spec: RunnerSpec, n_workers: int):
+        if int(n_workers) < 1:
+            raise ValueError(f"workers: expected >= 1, got {n_workers}")
+        self.spec = spec
+        self.n_workers = int(n_workers)
+        self._context = multiprocessing.get_context("spawn")
+        self._workers: list[tuple[Any, Any]] = []
+        try:
+            for _ in range(self.n_workers):
+                self._workers.append(self._start())
+            for process, connection in self._workers:
+                self._await_ready(process, connection)
+        except BaseException:
+            self.close()
+            raise
+
+    def _start(self):
+        parent, child = self._context.Pipe()
+        saved = {key: os.environ.get(key) for key in _WORKER_ENV}
+        os.environ.update(_WORKER_ENV)          # inherited by the spawned interpreter
+        try:
+            process = self._context.Process(target=_worker_main, args=(self.spec, child), daemon=True)
+            process.start()
+        finally:
+            for key, value in saved.items():
+                if value is None:
+                    os.environ.pop(key, None)
+                else:
+                    os.environ[key] = value
+        child.close()
+        return process, parent
+
+    @staticmethod
+    def _await_ready(process, connection) -> None:
+        try:
+            kind, payload = connection.recv()
+        except EOFError:
+            raise RuntimeError(f"a rollout worker exited while starting (exit code {process.exitcode})") from None
+        if kind != "ready":
+            raise RuntimeError(f"a rollout worker could not build its runner: {payload}")
+
+    def map(self, tasks, progress=None):
+        tasks = list(tasks)
+        results: list[RolloutResult | None] = [None] * len(tasks)
+        pending = list(range(len(tasks)))[::-1]
+        busy: dict[int, int] = {}            # worker slot -> task index
+        done = 0
+
+        def dispatch(slot: int) -> None:
+            index = pending.pop()
+            weights, seed = tasks[index]
+            self._workers[slot][1].send((index, np.asarray(weights, dtype=float), int(seed)))
+            busy[slot] = index
+
+        for slot in range(self.n_workers):
+            if pending:
+                dispatch(slot)
+        while busy:
+            ready = wait([self._workers[slot][1] for slot in busy])
+            for slot in [s for s in list(busy) if self._workers[s][1] in ready]:
+                connection = self._workers[slot][1]
+                try:
+                    kind, payload = connection.recv()
+                    index, result = payload
+                except EOFError:     # the worker died mid-rollout: record it, replace the worker
+                    index = busy[slot]
+                    process = self._workers[slot][0]
+                    process.join(timeout=5)
+                    result = RolloutResult(seed=int(tasks[index][1]), failed=True, reason="error",
+                                           message=f"the worker process died (exit code {process.exitcode})")
+                    self._workers[slot] = self._start()
+                    self._await_ready(*self._workers[slot])
+                del busy[slot]
+                results[index] = result
+                done += 1
+                if progress is not None:
+                    progress(index, result)
+                if pending:
+                    dispatch(slot)
+        return results  # type: ignore[return-value]
+
+    def close(self) -> None:
+        for process, connection in self._workers:
+            try:
+                connection.send(None)
+            except (BrokenPipeError, OSError):
+                pass
+        for process, connection in self._workers:
+            process.join(timeout=10)
+            if process.is_alive():
+                process.terminate()
+                process.join(timeout=5)
+            connection.close()
+        self._workers = []
+
+
+# ------------------------------------------------------------------------ Ray
+def ray_available() -> bool:
+    """Whether the optional ``ray`` package is installed."""
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+class _RayWorkerImpl:
+    """Body of the Ray actor: one runner, built once."""
+
+    def __init__(self, spec: RunnerSpec):
+        for key, value in _WORKER_ENV.items():
+            os.environ.setdefault(key, value)
+        if spec.quiet_ik:
+            _quiet_ik()
+        self._runner = spec.build()
+
+    def run(self, weights, seed):
+        return self._runner.run(np.asarray(weights, dtype=float), int(seed))
+
+
+class RayPool(_Pool):
+    """One Ray actor per worker (each builds one runner).
+
+    ``address``: an existing Ray cluster ("auto" or "ray://host:port"); None
+    starts a local Ray with ``ray.init()`` (and shuts it down on close).
+    ``num_cpus`` per actor: 1.
+    """
+
+    def __init__(self, spec: RunnerSpec, n_workers: int, address: str | None = None):
+        try:
+            import ray
+        except ImportError:
+            raise ValueError("--ray-address / RayPool needs the optional ray package: "
+                             ".venv/bin/pip install ray") from None
+        if int(n_workers) < 1:
+            raise ValueError(f"workers: expected >= 1, got {n_workers}")
+        self._ray = ray
+        self._owns_ray = False
+        if not ray.is_initialized():
+            if address:
+                ray.init(address=address, log_to_driver=False)
+            else:
+                ray.init(num_cpus=max(int(n_workers), 1), include_dashboard=False, log_to_driver=False)
+                self._owns_ray = True
+        self.n_workers = int(n_workers)
+        actor = ray.remote(num_cpus=1)(_RayWorkerImpl)
+        self._actors = [actor.remote(spec) for _ in range(self.n_workers)]
+
+    def map(self, tasks, progress=None):
+        ray = self._ray
+        tasks = list(tasks)
+        results: list[RolloutResult | None] = [None] * len(tasks)
+        pending = list(range(len(tasks)))[::-1]
+        busy: dict[Any, tuple[int, int]] = {}   # object ref -> (actor slot, task index)
+
+        def dispatch(slot: int) -> None:
+            index = pending.pop()
+            weights, seed = tasks[index]
+            ref = self._actors[slot].run.remote(np.asarray(weights, dtype=float), int(seed))
+            busy[ref] = (slot, index)
+
+        for slot in range(self.n_workers):
+            if pending:
+                dispatch(slot)
+        while busy:
+            ready, _ = ray.wait(list(busy), num_returns=1)
+            for ref in ready:
+                slot, index = busy.pop(ref)
+                try:
+                    result = ray.get(ref)
+                except Exception as error:   # the actor died: record, go on with the others
+                    result = RolloutResult(seed=int(tasks[index][1]), failed=True, reason="error",
+                                           message=f"Ray actor failed: {error}"[:500])
+                results[index] = result
+                if progress is not None:
+                    progress(index, result)
+                if pending:
+                    dispatch(slot)
+        return results  # type: ignore[return-value]
+
+    def close(self) -> None:
+        for actor in getattr(self, "_actors", []):
+            try:
+                self._ray.kill(actor)
+            except Exception:
+                pass
+        self._actors = []
+        if self._owns_ray:
+            self._ray.shutdown()
+            self._owns_ray = False
+
+
+def make_pool(spec: RunnerSpec, workers: int = 1, ray_address: str | None = None, use_ray: bool = False,
+              runner: RolloutRunner | None = None) -> _Pool:
+    """The pool for ``workers``: serial (1, on ``runner`` or one built from ``spec``),
+    processes (> 1), or Ray (``use_ray`` or a ``ray_address``)."""
+    if int(workers) < 1:
+        raise ValueError(f"workers: expected >= 1, got {workers}")
+    if use_ray or ray_address:
+        return RayPool(spec, workers, ray_address)
+    if int(workers) == 1:
+        return SerialPool(runner if runner is not None else spec.build())
+    return ProcessPool(spec, workers)
