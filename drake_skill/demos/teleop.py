@@ -372,7 +372,7 @@ class TeleopSession:
 
 
 def record_interactive(skill: str, count: int, seed: int = 0, config: TeleopConfig | None = None,
-                       meshcat=None, status=print) -> list:
+                       meshcat=None, status=print, station_config=None) -> list:
     """Records ``count`` successful interactive demonstrations (a failed one is repeated
     on the next seed). Starts Meshcat if none is given and prints its URL."""
     if meshcat is None:
@@ -381,7 +381,7 @@ def record_interactive(skill: str, count: int, seed: int = 0, config: TeleopConf
     status(f"Meshcat: {meshcat.web_url()}  (open it in a browser; keys act when the page has focus)")
     status("keys: W/S x, A/D y, E/Q z, L/J roll, I/K pitch, O/U yaw, X/Z gripper; "
            "R record, T stop")
-    session = TeleopSession(skill, meshcat, config)
+    session = TeleopSession(skill, meshcat, config, station_config=station_config)
     demos = []
     while len(demos) < count:
         demo = session.record(seed, status=status)
