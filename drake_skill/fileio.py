@@ -208,6 +208,31 @@ class staged_directory:
         return False
 
 
+def carry_over(source: str | os.PathLike, destination: str | os.PathLike, exclude=()) -> None:
+    """Links (or copies) every entry of folder ``source`` not named in ``exclude`` into ``destination``.
+
+    Used to keep a user's unrelated files when a staged directory replaces
+    ``source`` (hard links: no data copied, the old files stay intact).
+    """
+    import shutil
+
+    source, destination = Path(source), Path(destination)
+    if not source.is_dir():
+        return
+    for p in source.iterdir():
+        if p.name in exclude:
+            continue
+        if p.is_dir() and not p.is_symlink():
+            shutil.copytree(p, destination / p.name, symlinks=True)
+        elif p.is_symlink():
+            os.symlink(os.readlink(p), destination / p.name)
+        else:
+            try:
+                os.link(p, destination / p.name)
+            except OSError:
+                shutil.copy2(p, destination / p.name)
+
+
 def _umask() -> int:
     umask = os.umask(0)
     os.umask(umask)

@@ -195,18 +195,18 @@ class Skill:
         replaces ``directory`` in one swap (:class:`drake_skill.fileio.staged_directory`),
         so an interruption leaves the whole old skill or the whole new one.
         ``skill.json`` records the SHA-256 of every other file; :meth:`load`
-        checks them. Other files in an existing ``directory`` (pictures of an
-        earlier fit) go with the old skill.
+        checks them. Other files in an existing skill ``directory`` (the fit
+        command's pictures, a user's notes) are carried over; a non-empty
+        ``directory`` that holds no skill is refused.
         """
         directory = Path(directory)
         if directory.exists() and not directory.is_dir():
             raise NotADirectoryError(f"{directory}: exists and is not a directory; choose a folder for the skill")
         if (directory / "skill.json").exists() and not overwrite:
             raise FileExistsError(f"{directory} already holds a skill; pass overwrite=True (--force) to replace it")
-        if directory.is_dir() and any(directory.iterdir()) and not (directory / "skill.json").exists() \
-                and not overwrite:
+        if directory.is_dir() and any(directory.iterdir()) and not (directory / "skill.json").exists():
             raise FileExistsError(f"{directory}: exists, is not empty and holds no skill; choose an empty "
-                                  "or new folder, or pass overwrite=True (--force)")
+                                  "or new folder for the skill")
         arrays = {"sigma0": self.sigma0, "initial_index": np.array(self.initial_index)}
         for i, dmp in enumerate(self.dmps):
             arrays.update(dmp.to_arrays(prefix=f"dmp{i}_"))
@@ -215,6 +215,7 @@ class Skill:
         arrays.update({f"pomrp_{k}": v for k, v in pomrp_arrays.items()})
         weights_bytes = Path(self.pcae_weights).read_bytes()
         with fileio.staged_directory(directory, overwrite=True) as tmp:
+            fileio.carry_over(directory, tmp, exclude={*_SKILL_FILES, "skill.json"})
             fileio.atomic_write_bytes(tmp / "pcae.safetensors", weights_bytes)
             fileio.atomic_save_npz(tmp / "arrays.npz", arrays)
             fileio.atomic_write_text(tmp / "skill.yaml", yaml_dump_typed(self.config))

@@ -194,6 +194,6 @@ def test_cli_records_files_table_and_plot_and_never_overwrites(tmp_path, capsys)
     png = (out / "demos.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
     before = (out / "demo_000.npz").read_bytes()
-    assert main(["record", "--skill", "draw", "--count", "1", "--no-camera", "--out", str(out)]) == 1
+    assert main(["record", "--skill", "draw", "--count", "1", "--no-camera", "--out", str(out)]) == 2
     assert "already holds 1 demonstration file(s) (demo_000.npz); pass --force" in capsys.readouterr().err
     assert (out / "demo_000.npz").read_bytes() == before

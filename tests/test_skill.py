@@ -161,5 +161,10 @@ def test_fit_cli_writes_skill_and_pictures(close_data, tmp_path, capsys):
     for name in ("skill.yaml", "skill.json", "arrays.npz", "pcae.safetensors", "goal_model.png", "demo_returns.png"):
         assert (out / name).stat().st_size > 0, name
     assert Skill.load(out).name == "close"
-    with pytest.raises(SystemExit):          # never replaces a skill without --force
-        main(["fit", "--demos", str(tmp_path / "demos"), "--out", str(out)])
+    capsys.readouterr()
+    # never replaces a skill without --force: one error line, status 2, before any fitting
+    assert main(["fit", "--demos", str(tmp_path / "demos"), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"drake-skill: error: --out {out}: already holds a skill; pass --force to replace it "
+                   "or choose another folder"]
+    assert Skill.load(out).name == "close"

@@ -7,9 +7,11 @@ the ground-truth judge is replaced by the next seed. Interactive
 a gamepad and press Record / Stop (``drake_skill.demos.teleop``).
 
 Writes ``OUT/demo_000.npz``, ``demo_001.npz``, ... (format:
-``drake_skill.demos.format``) and ``OUT/demos.png`` (the demonstrated hand
-paths in the object frame and the object state over time), then prints a
-table. Existing demo files are never replaced without ``--force``.
+``drake_skill.demos.format``), ``OUT/demos.json`` (the list of the set) and
+``OUT/demos.png`` (the demonstrated hand paths in the object frame and the
+object state over time), then prints a table. Existing demo files are never
+replaced without ``--force``; with it the whole set is replaced at once
+(an interruption leaves the old set or the new one, never a mix).
 
 examples:
   drake-skill demos record --skill open --out demos/open
@@ -19,25 +21,28 @@ examples:
 
 import argparse
 import dataclasses as dc
-import sys
 from pathlib import Path
 
 import numpy as np
 
+from drake_skill.cli import errors
 from drake_skill.common import SKILLS
 from drake_skill.fileio import write_figure_png
 
+NAME = "demos"
+HELP = "record demonstrations: demos record --skill open --count 3 --out DIR"
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="drake-skill demos", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
     rec = sub.add_parser("record", help="record demonstrations of a skill",
-                         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+                         description=parser.description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    rec.add_argument("--verbose", action="store_true", default=argparse.SUPPRESS,
+                     help="print tracebacks of errors and every differential-IK warning")
     rec.add_argument("--skill", required=True, choices=SKILLS, help="the skill to demonstrate")
     rec.add_argument("--count", type=int, default=0,
                      help="demonstrations to record (default: the thesis' 3 open, 2 close, 2 draw)")
-    rec.add_argument("--out", type=Path, required=True, help="folder for demo_NNN.npz and demos.png")
+    rec.add_argument("--out", type=Path, required=True, help="folder for demo_NNN.npz, demos.json and demos.png")
     rec.add_argument("--seed", type=int, default=None,
                      help="first seed: object pose and variation of the first demonstration "
                           "(default: the config's, 0)")
@@ -47,9 +52,16 @@ def _parser() -> argparse.ArgumentParser:
                      help="skip the camera (much faster; the files then have no perception fields)")
     rec.add_argument("--config", type=Path,
                      help="YAML file of DemonstratorConfig fields (variation, rates, attempts)")
-    rec.add_argument("--force", action="store_true", help="replace the demo files already in --out (extra old ones are removed)")
+    rec.add_argument("--scenario", type=Path,
+                     help="station scenario YAML (keys left out keep the skill's shipped scenario)")
+    rec.add_argument("--force", action="store_true",
+                     help="replace the demonstrations already in --out (the whole set at once)")
     rec.add_argument("--quiet", action="store_true", help="no progress bar")
-    return parser
+    rec.set_defaults(_action=record)
+
+
+def run(args: argparse.Namespace) -> int:
+    return args._action(args)
 
 
 def _plot(demos, path: Path) -> Path:
@@ -108,49 +120,41 @@ def table(rows) -> str:
 
 
 def record(args) -> int:
-    from drake_skill.demos.format import demo_path, existing_demo_files, save_demonstration
     from drake_skill.demos.demonstrator import DEFAULT_COUNTS, DemonstratorConfig, load_demonstrator_config
+    from drake_skill.demos.format import existing_demo_files, save_demonstrations
 
-    config = load_demonstrator_config(args.config) if args.config else DemonstratorConfig()
+    # Everything a user can get wrong is checked before the first simulation.
     if args.count < 0:
-        print("drake-skill demos record: --count must be positive", file=sys.stderr)
-        return 2
+        raise ValueError(f"--count {args.count}: expected a positive number of demonstrations (0 = the default)")
+    existing = existing_demo_files(args.out)
+    held = (f"{len(existing)} demonstration file(s) "
+            f"({', '.join(p.name for p in existing[:3])}{', ...' if len(existing) > 3 else ''})")
+    errors.output_folder(args.out, "--out", occupied=bool(existing), force=args.force,
+                         what=held if existing else "the demonstrations")
+    if args.config:
+        errors.input_file(args.config, "--config", "a YAML file of DemonstratorConfig fields")
+    config = load_demonstrator_config(args.config) if args.config else DemonstratorConfig()
+    station_config = errors.station_config(args.skill, args.scenario) if args.scenario else None
     count = args.count or config.count or DEFAULT_COUNTS[args.skill]
     seed = config.seed if args.seed is None else args.seed
     config = dc.replace(config, count=count, seed=seed, record_perception=not args.no_camera)
-    existing = existing_demo_files(args.out)
-    if existing and not args.force:
-        print(f"drake-skill demos record: {args.out} already holds {len(existing)} demonstration file(s) "
-              f"({', '.join(p.name for p in existing[:3])}{', ...' if len(existing) > 3 else ''}); "
-              "pass --force to replace them or choose another --out", file=sys.stderr)
-        return 1
     if args.interactive:
         from drake_skill.demos.teleop import TeleopConfig, record_interactive
         demos = record_interactive(args.skill, count, seed=seed,
-                                   config=TeleopConfig(record_perception=not args.no_camera))
+                                   config=TeleopConfig(record_perception=not args.no_camera),
+                                   station_config=station_config)
     else:
         from drake_skill.demos.demonstrator import ScriptedDemonstrator
-        demos = ScriptedDemonstrator(args.skill, config).record_many(progress=not args.quiet)
-    if args.force:
-        # Stale files beyond the new count would mix with the new demonstrations.
-        for p in existing[len(demos):]:
-            p.unlink()
-    rows = []
-    for i, demo in enumerate(demos):
-        path = save_demonstration(demo, demo_path(args.out, i), force=args.force)
-        rows.append((path.name, demo))
-    png = _plot(demos, args.out / "demos.png")
-    print(table(rows))
-    print(f"wrote {len(demos)} demonstration(s) to {args.out}/ and {png}")
+        demos = ScriptedDemonstrator(args.skill, config, station_config=station_config).record_many(
+            progress=not args.quiet)
+    paths = save_demonstrations(demos, args.out, force=args.force,
+                                extra=lambda tmp: _plot(demos, tmp / "demos.png"))
+    print(table([(p.name, d) for p, d in zip(paths, demos)]))
+    print(f"wrote {len(demos)} demonstration(s) to {args.out}/ and {args.out / 'demos.png'}")
     return 0 if all(d.success for d in demos) else 1
 
 
 def main(argv=None) -> int:
-    args = _parser().parse_args(argv)
-    if args.action == "record":
-        return record(args)
-    return 2
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
+    """``drake-skill demos ARGV...`` (for scripts and tests)."""
+    from drake_skill.cli.main import command_main
+    return command_main(NAME, argv)

@@ -15,11 +15,16 @@ prints the goal model's summary, and writes SKILL_DIR:
 
 from __future__ import annotations
 
-from drake_skill.common import SKILLS
 import argparse
 from pathlib import Path
 
 import numpy as np
+
+from drake_skill.cli import errors
+from drake_skill.common import SKILLS
+
+NAME = "fit"
+HELP = "fit a skill (DMPs + goal model) from demonstrations"
 
 
 def _state_clouds(skill, demos):
@@ -35,9 +40,7 @@ def _state_clouds(skill, demos):
     return [best.get(s, (0, None))[1] for s in range(skill.pomrp.n_states)]
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="drake-skill fit", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--demos", type=Path, required=True, help="folder of demo_*.npz files")
     parser.add_argument("--out", type=Path, required=True, help="skill folder to write")
     parser.add_argument("--config", type=Path, help="SkillConfig YAML (defaults: thesis values)")
@@ -45,34 +48,49 @@ def main(argv=None) -> int:
                         help="skill name (default: read from the demonstrations)")
     parser.add_argument("--seed", type=int, help="picks the demonstration policy search starts from")
     parser.add_argument("--force", action="store_true", help="replace an existing skill in --out")
-    args = parser.parse_args(argv)
 
-    from pydrake.common.yaml import yaml_load_typed
+
+def run(args: argparse.Namespace) -> int:
+    # Everything a user can get wrong is checked before the fit starts.
+    errors.input_folder(args.demos, "--demos", "demo_*.npz files (drake-skill demos record)")
+    errors.output_folder(args.out, "--out", occupied=(args.out / "skill.json").exists(), force=args.force,
+                         what="a skill")
+    if args.out.is_dir() and any(args.out.iterdir()) and not (args.out / "skill.json").exists():
+        raise FileExistsError(f"--out {args.out}: exists, is not empty and holds no skill; choose an empty "
+                              "or new folder")
 
     from drake_skill.demos.format import load_demonstrations
     from drake_skill.reward.plots import plot_goal_model, plot_return
-    from drake_skill.skill import SkillConfig, default_skill_config, fit_skill
+    from drake_skill.skill import SkillConfig, _pcae_path, default_skill_config, fit_skill
 
-    if (args.out / "skill.json").exists() and not args.force:
-        parser.error(f"{args.out} already holds a skill; pass --force to replace it")
+    if args.config:  # parse errors and unknown keys before reading the demonstrations
+        errors.load_yaml(SkillConfig, args.config, "--config").dmp.validate()
     demos = load_demonstrations(args.demos)
-    if not demos:
-        parser.error(f"{args.demos}: no demo_*.npz files")
     skill_name = args.skill or demos[0].skill
     config = default_skill_config(skill_name)
     if args.config:
-        config = yaml_load_typed(schema=SkillConfig, filename=str(args.config), defaults=config)
+        config = errors.load_yaml(SkillConfig, args.config, "--config", defaults=config)
+        if args.skill and config.skill != args.skill:
+            raise ValueError(f"--config {args.config}: skill '{config.skill}' disagrees with --skill {args.skill}")
+        config.dmp.validate()
     if args.seed is not None:
         config.seed = args.seed
-    print(f"fitting '{skill_name}' from {len(demos)} demonstrations in {args.demos} ...")
+    errors.input_file(_pcae_path(config), "pcae_weights", "the PCAE weights (models/pcae.safetensors)")
+    print(f"fitting '{config.skill}' from {len(demos)} demonstrations in {args.demos} ...")
     skill = fit_skill(demos, config)
     skill.save(args.out, overwrite=args.force)
     print(skill.summary())
     plot_goal_model(skill.pomrp, args.out / "goal_model.png", clouds=_state_clouds(skill, demos),
-                    title=f"goal model of '{skill_name}'")
+                    title=f"goal model of '{config.skill}'")
     rewards = {f"demo {i}": skill.pomrp.rewards(skill.goal_data(d.object_points, d.perception_valid))
                for i, d in enumerate(demos)}
     plot_return(rewards, args.out / "demo_returns.png")
     print(f"wrote {args.out}/ (skill.yaml, skill.json, arrays.npz, pcae.safetensors, "
           "goal_model.png, demo_returns.png)")
     return 0
+
+
+def main(argv=None) -> int:
+    """``drake-skill fit ARGV...`` (for scripts and tests)."""
+    from drake_skill.cli.main import command_main
+    return command_main(NAME, argv)

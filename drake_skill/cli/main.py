@@ -1,38 +1,122 @@
-"""``drake-skill``: the command line.
+"""``drake-skill``: the command line, one argparse tree.
 
-Subcommands (``drake-skill <command> --help`` for each):
+Every subcommand is a module ``drake_skill/cli/<name>.py`` listed in
+:data:`COMMANDS` that defines
 
-  station-demo   scripted Open, Close and Draw in the simulated station
-  demos record   record demonstrations (scripted or interactive in Meshcat)
-  fit            fit a skill from demonstrations
-  bench NAME     benchmarks: station, dmp, perception, reward (``--json``)
+* ``NAME``: the subcommand as typed (``"station-demo"``),
+* ``HELP``: one line for ``drake-skill --help``,
+* ``add_arguments(parser)``: its options on the subparser,
+* ``run(args) -> int``: the work (heavy imports such as pydrake and torch go
+  inside ``run`` so that ``--help`` stays fast).
 
-Every subcommand's module has a ``main(argv) -> int``; this file only
-dispatches, so ``--help`` texts live beside the code they describe.
+A name in :data:`COMMANDS` whose module does not exist yet is skipped, so
+commands can be added by dropping a module in and listing it here.
+
+User errors (``ValueError``, ``OSError`` and their subclasses such as
+``FileNotFoundError``, ``FileExistsError``, ``NotADirectoryError``, and
+argument errors) print one line ``drake-skill: error: ...`` and exit with
+status 2; ``--verbose`` adds the traceback. Differential IK's
+unreachable-pose warnings are counted instead of printed unless ``--verbose``.
 """
 
 from __future__ import annotations
 
+import argparse
 import importlib
+import importlib.util
 import logging
+import re
 import sys
+import traceback
 
-COMMANDS = {
-    "station-demo": ("drake_skill.cli.station_demo", "scripted Open/Close/Draw in the simulated station"),
-    "demos": ("drake_skill.cli.demos", "record demonstrations: demos record --skill open --count 3 --out DIR"),
-    "fit": ("drake_skill.cli.fit", "fit a skill (DMPs + goal model) from demonstrations"),
-    "bench": (None, "benchmarks: station, dmp, perception, reward"),
-}
-BENCHES = ("station", "dmp", "perception", "reward")
+import yaml
+
+#: Command modules in the order ``--help`` lists them (missing ones are skipped).
+COMMANDS = ["station_demo", "demos", "fit", "learn", "evaluate", "bench", "hardware", "sim_robot"]
+
+DESCRIPTION = "Robot skill learning from very few demonstrations, as a Drake diagram."
+EPILOG = ("Run 'drake-skill COMMAND --help' for a command's options. User errors print one line "
+          "and exit with status 2; --verbose adds the traceback.")
 
 
-def _usage() -> str:
-    lines = ["usage: drake-skill <command> [options]", "", "Robot skill learning from very few "
-             "demonstrations, as a Drake diagram.", "", "commands:"]
-    lines += [f"  {name:<14}{text}" for name, (_, text) in COMMANDS.items()]
-    lines += ["", "Run 'drake-skill <command> --help' for a command's options.",
-              "--verbose (any command) also prints differential IK's unreachable-pose warnings."]
-    return "\n".join(lines)
+class UsageError(Exception):
+    """An argument error from argparse, reported as one line (exit status 2)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """ArgumentParser that raises :class:`UsageError` instead of printing usage and exiting."""
+
+    def error(self, message):
+        m = re.match(r"argument (?:command|COMMAND): invalid choice: '([^']*)'", message)
+        if m:
+            message = f"unknown command '{m.group(1)}' (run 'drake-skill --help' for the list)"
+        elif self.prog != "drake-skill":
+            message = f"{self.prog[len('drake-skill '):] if self.prog.startswith('drake-skill ') else self.prog}: " \
+                      f"{message} (see '{self.prog} --help')"
+        raise UsageError(message)
+
+
+def plain(text: str | None) -> str:
+    """Help text without reStructuredText markup (double backticks, :role:`x` references)."""
+    if not text:
+        return ""
+    text = re.sub(r":[a-z]+:`~?([^`<]*?)(?:\s*<[^>]*>)?`", r"\1", text)
+    return text.replace("``", "")
+
+
+def available_commands() -> list:
+    """The command modules of :data:`COMMANDS` that exist, imported (they import nothing heavy)."""
+    modules = []
+    for name in COMMANDS:
+        full = f"drake_skill.cli.{name}"
+        if importlib.util.find_spec(full) is None:
+            continue
+        module = importlib.import_module(full)
+        if not all(hasattr(module, a) for a in ("NAME", "HELP", "add_arguments", "run")):
+            raise RuntimeError(f"{full}: a command module needs NAME, HELP, add_arguments and run")
+        modules.append(module)
+    return modules
+
+
+def _add_common(parser: argparse.ArgumentParser, top: bool) -> None:
+    # On subparsers the default is SUPPRESS so that 'drake-skill --verbose fit' is not reset.
+    parser.add_argument("--verbose", action="store_true", default=False if top else argparse.SUPPRESS,
+                        help="print tracebacks of errors and every differential-IK warning")
+
+
+def build_parser() -> Parser:
+    """The whole command line: the global options and one subparser per command module."""
+    from drake_skill import __version__
+
+    parser = Parser(prog="drake-skill", description=DESCRIPTION, epilog=EPILOG)
+    parser.add_argument("--version", action="version", version=f"drake-skill {__version__}",
+                        help="print the version and exit")
+    _add_common(parser, top=True)
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands", parser_class=Parser)
+    sub.required = True
+    for module in available_commands():
+        doc = plain(getattr(module, "DESCRIPTION", None) or module.__doc__)
+        p = sub.add_parser(module.NAME, help=plain(module.HELP), description=doc,
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        _add_common(p, top=False)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run, _parser=p)
+        _plain_parser(p)
+    return parser
+
+
+def _plain_parser(parser: argparse.ArgumentParser) -> None:
+    """Strips reStructuredText markup from a parser's texts, its arguments' and its subparsers'."""
+    parser.description = plain(parser.description) or None
+    parser.epilog = plain(parser.epilog) or None
+    for action in parser._actions:
+        if isinstance(action.help, str) and action.help != argparse.SUPPRESS:
+            action.help = plain(action.help)
+        if isinstance(action, argparse._SubParsersAction):
+            for choice in action._choices_actions:
+                choice.help = plain(choice.help)
+            for sub in set(action.choices.values()):
+                _plain_parser(sub)
 
 
 class _QuietDiffIk(logging.Filter):
@@ -54,15 +138,48 @@ class _QuietDiffIk(logging.Filter):
         return True
 
 
+def one_line(error: BaseException) -> str:
+    """The message of a user error on one line."""
+    text = str(error) or type(error).__name__
+    if isinstance(error, OSError) and error.filename is not None and str(error.filename) not in text:
+        text = f"{error.filename}: {text}"
+    return " ".join(part.strip() for part in text.splitlines() if part.strip())
+
+
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    verbose = "--verbose" in argv  # known before parsing, so parse errors honour it too
     quiet = _QuietDiffIk()
-    if "--verbose" in argv:
-        argv.remove("--verbose")
-    else:
+    if not verbose:
         logging.getLogger("drake").addFilter(quiet)
     try:
-        return _dispatch(argv)
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:  # --help, --version
+            return int(e.code or 0)
+        try:
+            return int(args._run(args) or 0)
+        except SystemExit as e:  # a benchmark's own argparse (--help, bad option)
+            if e.code is None or isinstance(e.code, int):
+                return int(e.code or 0)
+            print(f"drake-skill: error: {e.code}", file=sys.stderr)
+            return 2
+    except UsageError as e:
+        if verbose:
+            traceback.print_exc()
+        print(f"drake-skill: error: {one_line(e)}", file=sys.stderr)
+        return 2
+    except (ValueError, OSError, yaml.YAMLError) as e:
+        if verbose:
+            traceback.print_exc()
+        print(f"drake-skill: error: {one_line(e)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        if verbose:
+            traceback.print_exc()
+        print("drake-skill: interrupted", file=sys.stderr)
+        return 130
     finally:
         logging.getLogger("drake").removeFilter(quiet)
         if quiet.count:
@@ -70,32 +187,9 @@ def main(argv=None) -> int:
                   "--verbose shows them)", file=sys.stderr)
 
 
-def _dispatch(argv) -> int:
-    if not argv or argv[0] in ("-h", "--help"):
-        print(_usage())
-        return 0
-    if argv[0] in ("-V", "--version"):
-        from drake_skill import __version__
-        print(__version__)
-        return 0
-    command, rest = argv[0], argv[1:]
-    if command not in COMMANDS:
-        print(f"drake-skill: unknown command {command!r}\n\n{_usage()}", file=sys.stderr)
-        return 2
-    if command == "bench":
-        if not rest or rest[0] in ("-h", "--help"):
-            print(f"usage: drake-skill bench {{{','.join(BENCHES)}}} [--json] [options]\n\n"
-                  "Benchmarks print a short table, or one JSON object with --json.\n"
-                  "'drake-skill bench NAME --help' describes what NAME measures.")
-            return 0
-        if rest[0] not in BENCHES:
-            print(f"drake-skill bench: unknown benchmark {rest[0]!r}; choose from {', '.join(BENCHES)}",
-                  file=sys.stderr)
-            return 2
-        module = importlib.import_module(f"drake_skill.bench.{rest[0]}")
-        return int(module.main(rest[1:]) or 0)
-    module = importlib.import_module(COMMANDS[command][0])
-    return int(module.main(rest) or 0)
+def command_main(name: str, argv=None) -> int:
+    """``drake-skill NAME ARGV...``: for each command module's ``main(argv)`` (scripts, tests)."""
+    return main([name, *(sys.argv[1:] if argv is None else list(argv))])
 
 
 if __name__ == "__main__":

@@ -426,7 +426,8 @@ def load_demonstrations(directory, skill: str | None = None) -> list[Demonstrati
         raise FileNotFoundError(f"{directory}: no such directory")
     paths = sorted(directory.glob("demo_*.npz"))
     if not paths:
-        raise FileNotFoundError(f"{directory}: no demo_*.npz files")
+        raise FileNotFoundError(f"{directory}: no demo_*.npz files (record some with "
+                                f"'drake-skill demos record --out {directory}')")
     _check_manifest(directory, paths)
     demos = [load_demonstration(p) for p in paths]
     if skill is not None:
@@ -482,9 +483,6 @@ def save_demonstrations(demos, directory, force: bool = False, extra=None) -> li
 
     Refuses (FileExistsError) to replace existing demonstrations unless ``force``.
     """
-    import os
-    import shutil
-
     from drake_skill import fileio
 
     directory = Path(directory)
@@ -500,17 +498,8 @@ def save_demonstrations(demos, directory, force: bool = False, extra=None) -> li
         demo.validate(str(demo_path(directory, i)))
     ours = {MANIFEST, "demos.png"}
     with fileio.staged_directory(directory, overwrite=True) as tmp:
-        if directory.is_dir():
-            for p in directory.iterdir():
-                if p.name in ours or (p.name.startswith("demo_") and p.suffix == ".npz"):
-                    continue
-                if p.is_dir():
-                    shutil.copytree(p, tmp / p.name, symlinks=True)
-                else:
-                    try:
-                        os.link(p, tmp / p.name)
-                    except OSError:
-                        shutil.copy2(p, tmp / p.name)
+        old_demos = {p.name for p in existing}
+        fileio.carry_over(directory, tmp, exclude=ours | old_demos)
         files = {}
         for i, demo in enumerate(demos):
             path = demo_path(tmp, i)
