@@ -9,10 +9,14 @@ from pydrake.common.yaml import yaml_load_typed
 
 from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, load_npz
+from scipy.special import logsumexp
+
 from drake_skill.reward.goal_model import (
     GoalHMM,
     GoalModelConfig,
+    _backward_log,
     forward_backward,
+    forward_log,
     n_free_parameters,
     viterbi,
 )
@@ -167,7 +171,7 @@ def test_inference_matches_hmmlearn(fitted4):
     assert np.isclose(gm.score(G), ref.score(G), rtol=1e-10)
     assert np.isclose(gm.score(X, lengths), ref.score(X, lengths), rtol=1e-10)
     np.testing.assert_array_equal(gm.decode(G), ref.decode(G)[1])
-    # Far from every state: the scaled pass underflows, the log-space fallback is exact.
+    # Far from every state: probabilities underflow, the log-space recursion is exact.
     far = G + 40.0
     np.testing.assert_allclose(gm.predict_proba(far), ref.predict_proba(far), atol=1e-8)
     assert np.isclose(gm.score(far), ref.score(far), rtol=1e-10)
@@ -244,3 +248,85 @@ def test_bad_input_is_a_clear_error(fitted4):
         gm.predict_proba(X[:10, :7])
     with pytest.raises(RuntimeError, match="not fitted"):
         GoalHMM().predict_proba(X[:10])
+
+
+# ----------------------------------------------------------- log-space posteriors
+def _strict_chain(k):
+    """Strict left-to-right chain: stay 0.9 or move one state on; zero elsewhere."""
+    P = np.zeros((k, k))
+    for i in range(k - 1):
+        P[i, i], P[i, i + 1] = 0.9, 0.1
+    P[-1, -1] = 1.0
+    pi = np.zeros(k)
+    pi[0] = 1.0
+    return pi, P
+
+
+def _reference_posteriors(log_b, pi, P):
+    """scipy logsumexp recursions (forward_log, _backward_log): the log-space reference."""
+    with np.errstate(divide="ignore"):
+        log_pi, log_P = np.log(pi), np.log(P)
+    la, ll = forward_log(log_b, log_pi, log_P)
+    lb = _backward_log(log_b, log_P)
+    norm = lambda x: np.exp(x - logsumexp(x, axis=1, keepdims=True))
+    return norm(la), norm(la + lb), ll
+
+
+@pytest.mark.parametrize("k, visits", [(3, [0] * 10 + [1] * 10 + [0] * 30),
+                                       (4, [0] * 10 + [1] * 10 + [2] * 10 + [1] * 10 + [0] * 10)])
+@pytest.mark.parametrize("gap", [20.0, 100.0, 1000.0])
+def test_posteriors_are_exact_for_zero_transitions_and_huge_gaps(k, visits, gap):
+    """The issue-12 reproducer: a strict chain visited 0 -> 1 -> 0 with log z_i = -gap |i - s_t|
+    (NaN returns at gap 100 with the probability-space recursion)."""
+    pi, P = _strict_chain(k)
+    s = np.array(visits)
+    log_b = -gap * np.abs(np.arange(k)[None, :] - s[:, None]).astype(float)
+    filtered, smoothed, ll = forward_backward(log_b, pi, P)
+    ref_f, ref_s, ref_ll = _reference_posteriors(log_b, pi, P)
+    assert np.all(np.isfinite(filtered)) and np.all(np.isfinite(smoothed))
+    np.testing.assert_allclose(filtered, ref_f, atol=1e-12)
+    np.testing.assert_allclose(smoothed, ref_s, atol=1e-12)
+    assert ll == pytest.approx(ref_ll, rel=1e-12)
+    # Every row is a distribution (the probability-space recursion gave NaN or lost whole
+    # posterior masses here).
+    np.testing.assert_allclose(filtered.sum(axis=1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(smoothed.sum(axis=1), 1.0, atol=1e-12)
+    # The numpy fallback (hmmlearn's compiled recursions absent) gives the same numbers.
+    import drake_skill.reward.goal_model as gm_module
+    saved = gm_module._hmmc
+    try:
+        gm_module._hmmc = None
+        f2, s2, ll2 = forward_backward(log_b, pi, P)
+    finally:
+        gm_module._hmmc = saved
+    np.testing.assert_allclose(f2, ref_f, atol=1e-12)
+    np.testing.assert_allclose(s2, ref_s, atol=1e-12)
+    assert ll2 == pytest.approx(ref_ll, rel=1e-12)
+
+
+def test_from_arrays_validates_like_a_fit(fitted4):
+    _, _, _, gm = fitted4
+    arrays, meta = gm.to_arrays()
+    k = gm.n_states_
+
+    def broken(**changes):
+        return {**arrays, **changes}
+
+    cov = arrays["covars"].copy()
+    cov[1, 0, 0] = np.nan
+    rows = arrays["transmat"].copy()
+    rows[2] *= 0.5
+    not_pd = arrays["covars"].copy()
+    not_pd[0] = -np.eye(not_pd.shape[1])
+    for changes, message in [
+            ({"covars": cov}, r"covars: contains NaN or inf"),
+            ({"covars": not_pd}, r"covars: a covariance is not positive definite"),
+            ({"transmat": rows}, r"transmat: row 2 sums to 0\.5"),
+            ({"startprob": np.full(k, 0.5)}, r"startprob: not a probability vector"),
+            ({"terminal_states": np.array([k])}, rf"terminal_states: \[{k}\], expected distinct states in \[0, {k}\)"),
+            ({"terminal_states": np.array([], dtype=int)}, r"terminal_states: \[\], expected a non-empty"),
+            ({"startprob": np.ones(k + 1) / (k + 1)}, rf"startprob: shape \({k + 1},\), expected \({k},\)")]:
+        with pytest.raises(ValueError, match=message):
+            GoalHMM.from_arrays(broken(**changes), meta, prefix="")
+    with pytest.raises(ValueError, match=r"metadata 'n_states' = 99 disagrees"):
+        GoalHMM.from_arrays(arrays, {**meta, "n_states": 99})

@@ -176,3 +176,117 @@ def test_bench_reward_json(capsys):
     assert bench_reward.main(["--json", "--no-fit", "--repeats", "5"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert 0 < out["reward_ms"] < 50 and out["n_frames"] == 50 and out["bench_states"] == 8
+
+
+# ------------------------------------------------- issue 12: finite, robust rewards
+from drake_skill.reward.goal_model import GoalHMM, _backward_log, forward_log  # noqa: E402
+from drake_skill.reward.pomrp import OffModelConfig  # noqa: E402
+
+
+def _strict_chain_pomrp():
+    """3 states on a line (1-D goal data, means 0, 10, 20, variance 0.01): emission
+    log-densities of one frame differ by thousands of nats; strict left-to-right chain."""
+    k = 3
+    P = np.array([[0.9, 0.1, 0.0], [0.0, 0.9, 0.1], [0.0, 0.0, 1.0]])
+    arrays = {"startprob": np.array([1.0, 0.0, 0.0]), "transmat": P, "means": np.array([[0.0], [10.0], [20.0]]),
+              "covars": np.full((k, 1, 1), 0.01), "terminal_states": np.array([2]), "lengths": np.array([50]),
+              "loglik_per_step": np.array([1.0])}
+    hmm = GoalHMM.from_arrays(arrays, {"covariance_type": "full"})
+    return Pomrp(hmm, np.array([0.5, 2.0, 20.0]), off_model=OffModelConfig(enabled=False))
+
+
+def test_reward_of_the_nan_reproducer_is_finite_and_exact():
+    pomrp = _strict_chain_pomrp()
+    gm = pomrp.goal_model
+    for visits in ([0] * 10 + [1] * 10 + [0] * 30, [0] * 10 + [1] * 10 + [2] * 10 + [1] * 10 + [0] * 10):
+        G = gm.means_[np.array(visits)]
+        h, R = pomrp.reward_and_return(G)
+        log_b = gm.log_emission(G)
+        with np.errstate(divide="ignore"):
+            log_pi, log_P = np.log(gm.startprob_), np.log(gm.transmat_)
+        la, _ = forward_log(log_b, log_pi, log_P)
+        lg = la + _backward_log(log_b, log_P)
+        smoothed = np.exp(lg - lg.max(axis=1, keepdims=True))
+        smoothed /= smoothed.sum(axis=1, keepdims=True)
+        filtered = np.exp(la - la.max(axis=1, keepdims=True))
+        filtered /= filtered.sum(axis=1, keepdims=True)
+        assert np.isfinite(R)
+        np.testing.assert_allclose(h, smoothed @ pomrp.values, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(pomrp.filtered_rewards(G), filtered @ pomrp.values, rtol=1e-9, atol=1e-12)
+        # The batch filtered rewards are the streaming filter's.
+        lb, streamed = None, []
+        for t, g in enumerate(G):
+            lb, _, r = pomrp.filter_update(lb, g, first=(t == 0))
+            streamed.append(r)
+        np.testing.assert_allclose(streamed, pomrp.filtered_rewards(G), rtol=1e-9, atol=1e-12)
+
+
+def _noise(seed, like):
+    """Goal data far from every state: Gaussian noise at 3x the data's spread."""
+    rng = np.random.default_rng(seed)
+    return like.mean(axis=0) + 3 * like.std() * rng.standard_normal((50, like.shape[1]))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_off_model_data_scores_below_a_stall_and_fails(seed):
+    true = left_to_right_model(n_states=4, seed=seed)
+    X, lengths = sample_demonstrations(true, [50, 60, 45], seed=seed)
+    guarded = fit_pomrp(X, lengths)
+    plain = Pomrp(guarded.goal_model, guarded.values, guarded.verdict_config, {}, OffModelConfig(enabled=False),
+                  guarded.frame_loglik_range)
+    _, _, means, covars = true
+    rng = np.random.default_rng(seed)
+    half = means[np.r_[[0] * 10, [1] * 40]] + rng.standard_normal((50, means.shape[1])) * np.sqrt(covars[0, 0, 0])
+    demo = sample_demonstrations(true, [50], seed=100 + seed)[0]
+    noise = _noise(seed, X)
+    # Guarded (default): noise earns (almost) nothing and is no success; the
+    # stall and the demonstration keep their plain returns within 5 %.
+    assert guarded.episode_return(noise) < 0.01 * guarded.episode_return(half)
+    assert not guarded.verdict(noise) and not guarded.verdict_details(noise)["final_frame_explained"]
+    assert guarded.episode_return(half) == pytest.approx(plain.episode_return(half), rel=0.05)
+    assert guarded.episode_return(demo) == pytest.approx(plain.episode_return(demo), rel=1e-6)
+    assert guarded.verdict(demo) and not guarded.verdict(half)
+    # The thesis's plain form rewards the noise (measured 216-674 against stalls of 103-182).
+    assert plain.episode_return(noise) > plain.episode_return(half)
+
+
+def test_off_model_weight_at_its_boundary(pomrp, held_out):
+    """w_t = 1 down to l_lo - margin, then the likelihood ratio; the verdict's cut is the same floor."""
+    G = held_out[0]
+    floor = pomrp.explained_floor
+    assert floor == pytest.approx(pomrp.frame_loglik_range[0] - 10.0)
+    gm = pomrp.goal_model
+    log_b = gm.log_emission(G)
+    shift = log_b.max(axis=1) - floor  # >= 0 on demonstration-like data
+    assert np.all(shift > 0)
+    np.testing.assert_array_equal(pomrp.explained_weights(log_b), 1.0)
+    lowered = log_b - (shift + 1.5)[:, None]  # every frame 1.5 nats below the floor
+    np.testing.assert_allclose(pomrp.explained_weights(lowered), np.exp(-1.5), rtol=1e-12)
+    # Move the last frame away from its state until it falls just below / above the floor.
+    last = G[-1]
+    direction = np.ones_like(last) / np.sqrt(last.size)
+    def final_ll(alpha):
+        H = G.copy()
+        H[-1] = last + alpha * direction
+        return pomrp.verdict_details(H)
+    lo, hi = 0.0, 5.0
+    assert final_ll(lo)["final_frame_explained"] and not final_ll(hi)["final_frame_explained"]
+    for _ in range(40):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if final_ll(mid)["final_frame_explained"] else (lo, mid)
+    assert final_ll(lo)["final_frame_loglik"] >= floor > final_ll(hi)["final_frame_loglik"]
+    assert final_ll(hi)["final_frame_loglik"] == pytest.approx(floor, abs=1e-6)
+    assert not final_ll(hi)["success"]
+
+
+def test_verdict_is_decided_by_the_last_viterbi_frame(pomrp):
+    """Reaching the terminal sub-goal on the very last frame is a success; one frame short is not."""
+    term = int(pomrp.terminal_states[0])
+    for seed in range(3):
+        reached = _path_sequence([0] * 10 + [1] * 10 + [2] * 10 + [3], 200 + seed)
+        d = pomrp.verdict_details(reached)
+        path = pomrp.goal_model.decode(reached)
+        assert path[-1] == term and path[-2] != term  # the boundary: only path[-1] is terminal
+        assert d["final_state"] == term and d["terminal"] and d["success"]
+        short = _path_sequence([0] * 10 + [1] * 10 + [2] * 11, 300 + seed)
+        assert pomrp.goal_model.decode(short)[-1] != term and not pomrp.verdict(short)
