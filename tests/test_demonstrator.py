@@ -12,10 +12,9 @@ from drake_skill.demos.format import load_demonstration, save_demonstration
 from drake_skill.demos.demonstrator import (
     DemonstratorConfig,
     ScriptedDemonstrator,
-    StationRecorder,
+    demonstration_from,
     humanlike_plan,
     load_demonstrator_config,
-    make_perception,
     pose_to_vector,
 )
 from drake_skill.perception.systems import ObjectSegmenter, segmenter_config_for_station
@@ -153,15 +152,14 @@ def test_record_many_retries_failed_variations(draw_demonstrator, monkeypatch):
 
 def test_perception_is_recorded_at_10_hz_on_the_action_instants():
     """Camera on: 1 s of the hand holding home, recorded at 100 Hz with segmented frames at 10 Hz."""
-    sim = StationSimulation(scenario_for_skill("open"))
+    sim = StationSimulation(scenario_for_skill("open"), perceive=True)
     X_WO = sim.reset(5)
     sim.set_plan(hold_plan(sim.home_pose()))
-    recorder = StationRecorder(sim.station, sim.context, sim.simulator, 100.0, 10.0,
-                               make_perception(sim.station))
+    recorder = sim.recorder(100.0, 10.0)
     assert recorder.anchor() == 0.0
     for _ in range(101):
         recorder.sample(0.0)
-    demo = recorder.demonstration("open", 5, X_WO, success=False, metadata={"source": "test"})
+    demo = demonstration_from(recorder, "open", 5, X_WO, success=False, metadata={"source": "test"})
     assert demo.object_points.shape == (11, 2048, 3) and demo.object_points.dtype == np.float32
     assert demo.perception_valid.all()
     assert demo.times.tolist() == pytest.approx(np.arange(11) * 0.1)

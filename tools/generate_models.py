@@ -25,7 +25,11 @@ generated files are committed.
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from drake_skill.station import limits  # noqa: E402  (numpy only)
 
 MODELS = Path(__file__).resolve().parent.parent / "models"
 
@@ -43,10 +47,9 @@ DH = [
 ]
 FLANGE_D = 0.107
 
-Q_MIN = [-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973]
-Q_MAX = [2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973]
-QD_MAX = [2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.6100]
-TAU_MAX = [87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0]
+# Joint limits: the one definition, shared with the controller and the hardware port.
+Q_MIN, Q_MAX, QD_MAX, TAU_MAX = (limits.Q_MIN.tolist(), limits.Q_MAX.tolist(), limits.QD_MAX.tolist(),
+                                 limits.TAU_MAX.tolist())
 
 # Gaz et al. 2019, Table (feasible parameters): mass [kg], CoM in the link's DH
 # frame [m], inertia about the CoM [kg m^2] as (xx, xy, xz, yy, yz, zz).
@@ -99,6 +102,11 @@ CAPSULES = {
 
 def _pose(xyz, rpy=(0.0, 0.0, 0.0)) -> str:
     return " ".join(f"{v:.6g}" for v in (*xyz, *rpy))
+
+
+def _pose_exact(xyz, rpy) -> str:
+    """A pose at full double precision (the DH angles: pi / 2 to every digit)."""
+    return " ".join(repr(float(v)) for v in (*xyz, *rpy))
 
 
 def _inertial(mass, com, inertia) -> str:
@@ -164,8 +172,12 @@ def _capsule(name, p0, p1, radius, color, collision=True) -> str:
                                      if collision else None))
 
 
-def _geometry(name, centre, rpy, color, visual_geom, collision_geom, friction=None) -> str:
-    """An SDF visual (when ``visual_geom``) and collision (when ``collision_geom``) at one pose."""
+def _geometry(name, centre, rpy, color, visual_geom, collision_geom) -> str:
+    """An SDF visual (when ``visual_geom``) and collision (when ``collision_geom``) at one pose.
+
+    Contact parameters (friction, stiffness, dissipation) are not written here:
+    the station sets them per surface from its scenario (``StationConfig.contact``).
+    """
     out = ""
     if visual_geom:
         out += f"""      <visual name="{name}_visual">
@@ -175,25 +187,17 @@ def _geometry(name, centre, rpy, color, visual_geom, collision_geom, friction=No
       </visual>
 """
     if collision_geom:
-        fr = ""
-        if friction is not None:
-            fr = f"""
-        <drake:proximity_properties>
-          <drake:mu_dynamic>{friction}</drake:mu_dynamic>
-          <drake:mu_static>{friction}</drake:mu_static>
-        </drake:proximity_properties>"""
         out += f"""      <collision name="{name}_collision">
         <pose>{_pose(centre, rpy)}</pose>
-        <geometry>{collision_geom}</geometry>{fr}
+        <geometry>{collision_geom}</geometry>
       </collision>
 """
     return out
 
 
-def _box(name, centre, size, color, rpy=(0.0, 0.0, 0.0), collision=True, visual=True,
-         friction=None) -> str:
+def _box(name, centre, size, color, rpy=(0.0, 0.0, 0.0), collision=True, visual=True) -> str:
     geom = "<box><size>{}</size></box>".format(" ".join(f"{s:.6g}" for s in size))
-    return _geometry(name, centre, rpy, color, geom if visual else None, geom if collision else None, friction)
+    return _geometry(name, centre, rpy, color, geom if visual else None, geom if collision else None)
 
 
 def _cylinder(name, centre, radius, length, color, rpy=(0.0, 0.0, 0.0), collision=True) -> str:
@@ -225,7 +229,7 @@ def panda_arm() -> str:
         body += _capsule(f"link0_{cap_i}", p0, p1, r, WHITE)
     body += "    </link>\n"
     for i, (a, d, alpha) in enumerate(DH, start=1):
-        xyz = (a, -d * math.sin(alpha), d * math.cos(alpha))
+        xyz = tuple(0.0 if abs(v) < 1e-12 else v for v in (a, -d * math.sin(alpha), d * math.cos(alpha)))
         body += f"""    <link name="panda_link{i}">
       <pose relative_to="panda_joint{i}"/>
 {_inertial(*INERTIAL[i])}"""
@@ -234,7 +238,7 @@ def panda_arm() -> str:
             body += _capsule(f"link{i}_{cap_i}", p0, p1, r, color)
         body += f"""    </link>
     <joint name="panda_joint{i}" type="revolute">
-      <pose relative_to="panda_link{i - 1}">{_pose(xyz, (alpha, 0.0, 0.0))}</pose>
+      <pose relative_to="panda_link{i - 1}">{_pose_exact(xyz, (alpha, 0.0, 0.0))}</pose>
       <parent>panda_link{i - 1}</parent>
       <child>panda_link{i}</child>
       <axis>
@@ -262,11 +266,16 @@ def panda_arm() -> str:
 FINGER_Z = 0.0584
 FINGER_SIZE = (0.022, 0.018, 0.054)   # x (thickness), y (inward face), z (length)
 TCP_Z = 0.1034
+# The hand's inertia about its CoM (xx, xy, xz, yy, yz, zz) [kg m^2]: the
+# largest moment is about x_H, across the 0.20 m span of the fingers' y axis
+# (as a 0.055 x 0.20 x 0.06 m box of 0.73 kg would have it), the smallest
+# about y_H.
+HAND_INERTIA = (0.0025, 0.0, 0.0, 0.001, 0.0, 0.0017)
 
 
 def panda_hand() -> str:
     body = f"""    <link name="panda_hand">
-{_inertial(0.73, (-0.01, 0.0, 0.03), (0.001, 0.0, 0.0, 0.0025, 0.0, 0.0017))}{_box("hand_body", (0, 0, 0.03), (0.055, 0.20, 0.06), WHITE)}{_box("hand_base", (0, 0, 0.005), (0.06, 0.07, 0.01), DARK, collision=False)}    </link>
+{_inertial(0.73, (-0.01, 0.0, 0.03), HAND_INERTIA)}{_box("hand_body", (0, 0, 0.03), (0.055, 0.20, 0.06), WHITE)}{_box("hand_base", (0, 0, 0.005), (0.06, 0.07, 0.01), DARK, collision=False)}    </link>
     <frame name="panda_tcp" attached_to="panda_hand">
       <pose relative_to="panda_hand">0 0 {TCP_Z} 0 0 0</pose>
     </frame>
@@ -277,14 +286,14 @@ def panda_hand() -> str:
         cz = FINGER_SIZE[2] / 2
         body += f"""    <link name="panda_{side}finger">
       <pose relative_to="panda_finger_joint_{side}"/>
-{_inertial(0.015, (0, cy, cz), (2.375e-06, 0.0, 0.0, 2.375e-06, 0.0, 7.5e-07))}{_box(f"{side}finger", (cx, cy, cz), FINGER_SIZE, DARK, friction=1.0)}    </link>
+{_inertial(0.015, (0, cy, cz), (2.375e-06, 0.0, 0.0, 2.375e-06, 0.0, 7.5e-07))}{_box(f"{side}finger", (cx, cy, cz), FINGER_SIZE, DARK)}    </link>
     <joint name="panda_finger_joint_{side}" type="prismatic">
       <pose relative_to="panda_hand">0 0 {FINGER_Z} 0 0 0</pose>
       <parent>panda_hand</parent>
       <child>panda_{side}finger</child>
       <axis>
         <xyz>0 {sign:.0f} 0</xyz>
-        <limit><lower>0.0</lower><upper>0.04</upper><velocity>0.2</velocity><effort>70</effort></limit>
+        <limit><lower>0.0</lower><upper>{limits.FINGER_MAX}</upper><velocity>{limits.FINGER_SPEED_MAX}</velocity><effort>{limits.FINGER_FORCE_MAX}</effort></limit>
         <dynamics><damping>0.0</damping></dynamics>
       </axis>
     </joint>
@@ -302,7 +311,7 @@ def table() -> str:
     x, y = TABLE_CENTRE
     sx, sy, sz = TABLE_TOP
     body = f"""    <link name="table_top">
-{_inertial(20.0, (x, y, -sz / 2), _box_inertia(20.0, TABLE_TOP))}{_box("top", (x, y, -sz / 2), TABLE_TOP, WOOD, friction=0.8)}"""
+{_inertial(20.0, (x, y, -sz / 2), _box_inertia(20.0, TABLE_TOP))}{_box("top", (x, y, -sz / 2), TABLE_TOP, WOOD)}"""
     for i, (lx, ly) in enumerate(((1, 1), (1, -1), (-1, 1), (-1, -1))):
         body += _box(f"leg{i}", (x + lx * (sx / 2 - 0.05), y + ly * (sy / 2 - 0.05), -0.4),
                      (0.05, 0.05, 0.72), WOOD, collision=False)
@@ -315,24 +324,27 @@ def table() -> str:
 BOX_BASE = (0.20, 0.30, 0.13)
 LID = (0.225, 0.30, 0.02)          # overhangs the front by 2.5 cm: the lip
 HINGE = (0.10, 0.0, 0.13)          # back top edge
+# The lid's stay (a strap or stop) holds it open at this angle [rad], past its
+# tipping angle; the hinge's damping and friction are the scenario's
+# (drake_skill/station/scenarios), applied by the station builder.
+LID_STAY = 1.9
 
 
 def box() -> str:
     bx, by, bz = BOX_BASE
     lx, ly, lz = LID
     body = f"""    <link name="box_base">
-{_inertial(2.0, (0, 0, bz / 2), _box_inertia(2.0, BOX_BASE))}{_box("base", (0, 0, bz / 2), BOX_BASE, BLUE, friction=0.8)}    </link>
+{_inertial(2.0, (0, 0, bz / 2), _box_inertia(2.0, BOX_BASE))}{_box("base", (0, 0, bz / 2), BOX_BASE, BLUE)}    </link>
     <link name="box_lid">
       <pose relative_to="lid_hinge"/>
-{_inertial(0.3, (-lx / 2, 0, lz / 2), _box_inertia(0.3, LID))}{_box("lid", (-lx / 2, 0, lz / 2), LID, BLUE, friction=0.8)}    </link>
+{_inertial(0.3, (-lx / 2, 0, lz / 2), _box_inertia(0.3, LID))}{_box("lid", (-lx / 2, 0, lz / 2), LID, BLUE)}    </link>
     <joint name="lid_hinge" type="revolute">
       <pose relative_to="box_base">{_pose(HINGE)}</pose>
       <parent>box_base</parent>
       <child>box_lid</child>
       <axis>
         <xyz>0 1 0</xyz>
-        <limit><lower>0.0</lower><upper>2.2</upper><effort>0</effort></limit>
-        <dynamics><damping>1.5</damping></dynamics>
+        <limit><lower>0.0</lower><upper>{LID_STAY}</upper><effort>0</effort></limit>
       </axis>
     </joint>
 """
@@ -357,7 +369,7 @@ def drawer() -> str:
     dx, dy, dz = DRAWER
     front = -dx / 2 - 0.005
     body = f"""    <link name="cabinet">
-{_inertial(8.0, (0, 0, cz / 2), _box_inertia(8.0, CABINET))}{_box("cabinet", (0, 0, cz / 2), CABINET, BLUE, friction=0.8)}    </link>
+{_inertial(8.0, (0, 0, cz / 2), _box_inertia(8.0, CABINET))}{_box("cabinet", (0, 0, cz / 2), CABINET, BLUE)}    </link>
     <link name="drawer">
       <pose relative_to="drawer_slide"/>
 {_inertial(1.0, (0, 0, dz / 2), _box_inertia(1.0, DRAWER))}{_box("drawer_body", (0, 0, dz / 2), DRAWER, BLUE)}{_box("drawer_front", (front, 0, dz / 2), (0.01, dy + 0.02, dz + 0.02), BLUE)}"""
@@ -374,7 +386,6 @@ def drawer() -> str:
       <axis>
         <xyz>-1 0 0</xyz>
         <limit><lower>0.0</lower><upper>0.22</upper><effort>0</effort></limit>
-        <dynamics><damping>8.0</damping></dynamics>
       </axis>
     </joint>
 """

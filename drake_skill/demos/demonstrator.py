@@ -20,9 +20,10 @@ recording would:
   non-expert demonstrations, is the variation below). The 10 Hz action
   data are the 100 Hz samples taken uniformly (every 10th, last kept).
 * perceptual data: the camera's cloud at 10 Hz (the camera frames are the
-  10 Hz action instants), segmented at once (``drake_skill.perception.segmentation``)
-  to the object's 2048 points, a validity flag, and the perceived X_WO at the
-  first frame. The full 640 x 480 clouds are not kept: 100 frames of
+  10 Hz action instants), segmented by the ``ObjectSegmenter`` system wired in
+  the diagram, the very system skill executions use (the same 2048 points, and
+  an invalid frame holds the last valid one), a validity flag, and the
+  perceived X_WO at the first valid frame. The full 640 x 480 clouds are not kept: 100 frames of
   307,200 points are ~370 MB per demonstration.
 
 Human-like variation (``DemonstratorConfig``, all drawn from the seed):
@@ -49,7 +50,8 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_skill.demos.format import Demonstration, downsample_action, object_frame_poses
 from drake_skill.station.pose_source import PosePlan
-from drake_skill.station.simulation import DivergedError, StationSimulation, pose_to_vector
+from drake_skill.station.simulation import StationRecorder, StationSimulation, pose_to_vector
+from drake_skill.station.success import judge_run
 from drake_skill.station.config import SKILLS, StationConfig, scenario_for_skill
 
 #: Thesis section 6.2: demonstrations per skill.
@@ -76,7 +78,8 @@ class DemonstratorConfig:
     pause_range: its duration, uniform in [min, max] [s].
     overshoot: the approach (first move from home) goes this far past its
       target before settling back [m]; scaled by a uniform factor in [0.5, 1].
-    settle_time: the last keyframe is held this long before the recording ends [s].
+    settle_time: the last keyframe is held this long before the recording ends [s]
+      (at least the scenario's ``success.settle_time``, the judge's settle phase).
     max_attempts: seeds tried per demonstration before giving up.
     record_hz: rate of the raw action data [Hz] (the thesis: 100).
     action_hz: rate of the downsampled action data [Hz] (the thesis: 10);
@@ -211,174 +214,38 @@ def humanlike_plan(skill: str, X_WO: RigidTransform, X_WE_home: RigidTransform, 
     return PosePlan.from_poses(times, poses, grip), variation
 
 
-# --------------------------------------------------------------------------- perception
-class DemonstrationPerception:
-    """Segments camera frames into the object's points (``drake_skill.perception.segmentation``).
-
-    Uses the configuration of the ObjectSegmenter that skill executions use
-    (``object_segmenter.segmenter_config_for_station``): the same thresholds,
-    table-plane fit on the first frame and resampling seed, so a
-    demonstration's object points are what that system outputs for the same
-    frames. One difference: for an invalid frame (object not found) this
-    gives zeros and valid = False, where the system holds its last valid
-    frame. Plain numpy; the caller owns the station and its camera.
-    """
-
-    def __init__(self, segmenter_config):
-        self.config = segmenter_config.validate()
-        self.image_shape = (int(segmenter_config.image_height), int(segmenter_config.image_width))
-        self._plane = None
-
-    def start(self, xyz: np.ndarray) -> None:
-        """Fits the table plane on the first frame. xyz: (P, 3) world [m]."""
-        from drake_skill.perception.segmentation import fit_table_plane
-
-        self._plane = fit_table_plane(xyz, self.config.segmentation, self.image_shape, seed=self.config.seed)
-
-    def frame(self, xyz: np.ndarray, rgb: np.ndarray):
-        """One frame -> (points (n_points, 3) float32 [m, W], valid, X_WO (7,) or None).
-
-        xyz: (P, 3) float [m], rgb: (P, 3) uint8, the organised cloud.
-        """
-        from drake_skill.perception.segmentation import process_frame
-
-        if self._plane is None:
-            raise ValueError("DemonstrationPerception.frame called before start()")
-        result = process_frame(xyz, rgb, self._plane, self.config.segmentation, self.image_shape,
-                               n_points=self.config.n_points, seed=self.config.seed)
-        if not result.valid:
-            return np.zeros((self.config.n_points, 3), np.float32), False, None
-        X_WO = RigidTransform(RotationMatrix.MakeZRotation(result.box.yaw), result.box.position)
-        return result.points.astype(np.float32), True, pose_to_vector(X_WO)
-
-
 # --------------------------------------------------------------------------- recording
-class StationRecorder:
-    """Samples a running station: hand pose, joints, object state at ``record_hz``,
-    and the camera at ``action_hz``, on one grid whose every k-th sample is a
-    camera frame (k = record_hz / action_hz).
-
-    The grid is anchored at a camera frame time. Drake handles a discrete
-    update due at time t at the start of the step *after* t, so at a camera
-    instant the recorder advances to the event's exact time and then
-    processes the pending events, which refreshes the held image to the
-    scene at that instant (otherwise the cloud would be one frame old).
-    """
-
-    def __init__(self, station, root_context, simulator, record_hz: float = 100.0,
-                 action_hz: float = 10.0, perception: DemonstrationPerception | None = None):
-        self.station = station
-        self.simulator = simulator
-        self.root_context = root_context
-        self.context = station.GetMyContextFromRoot(root_context)
-        self.record_hz, self.action_hz = float(record_hz), float(action_hz)
-        self.k = int(round(record_hz / action_hz))
-        self.perception = perception
-        if perception is not None:
-            fps = station.config.camera.fps
-            if fps != action_hz:
-                raise ValueError(f"camera.fps = {fps} Hz: recording perception needs the camera "
-                                 f"at action_hz = {action_hz} Hz")
-        # The same float the camera's sample-and-hold uses, so k * period is
-        # exactly its event time.
-        self._camera_period = 1.0 / self.action_hz
-        self._ports = {name: station.GetOutputPort(name)
-                       for name in ("ee_pose", "panda_state", "object_state")}
-        self.reset()
-
-    def reset(self) -> None:
-        self.X_WE, self.q, self.obj, self.grip, self.points, self.valid = [], [], [], [], [], []
-        self.X_WO_perceived, self.X_WO_frame = None, None
-        self._frame0 = None
-        self._n = 0
-
-    def anchor(self) -> float:
-        """Starts the grid at the first camera frame time at or after now; returns it."""
-        t = self.root_context.get_time()
-        frame = int(math.ceil(t / self._camera_period - 1e-9))
-        self._frame0 = frame
-        return frame * self._camera_period
-
-    def next_time(self) -> float:
-        """Time [s] of the next sample on the grid (nominal)."""
-        return self._frame0 * self._camera_period + self._n / self.record_hz
-
-    def sample(self, gripper_command: float) -> None:
-        """Advances to the next grid time and records it (camera frames included)."""
-        if self._frame0 is None:
-            raise ValueError("StationRecorder.sample called before anchor()")
-        i = self._n
-        t = self.next_time()
-        if i % self.k == 0:
-            t_frame = (self._frame0 + i // self.k) * self._camera_period
-            self.simulator.AdvanceTo(max(t, t_frame))
-            self.simulator.AdvancePendingEvents()
-            if self.perception is not None:
-                self._perceive(i // self.k)
-        else:
-            self.simulator.AdvanceTo(max(t, self.root_context.get_time()))
-        state = self._ports["panda_state"].Eval(self.context)
-        if not np.all(np.isfinite(state)):
-            raise DivergedError(f"simulation diverged at t = {t:.3f} s")
-        self.X_WE.append(pose_to_vector(self._ports["ee_pose"].Eval(self.context)))
-        self.q.append(state[:7].copy())
-        self.obj.append(float(self._ports["object_state"].Eval(self.context)[0]))
-        self.grip.append(float(gripper_command))
-        self._n += 1
-
-    def _perceive(self, frame_index: int) -> None:
-        cloud = self.station.GetOutputPort("point_cloud").Eval(self.context)
-        xyz, rgb = cloud.xyzs().T, cloud.rgbs().T
-        if frame_index == 0:
-            self.perception.start(xyz)
-        points, valid, X_WO = self.perception.frame(xyz, rgb)
-        if X_WO is not None and self.X_WO_perceived is None:
-            self.X_WO_perceived, self.X_WO_frame = X_WO, frame_index
-        self.points.append(points)
-        self.valid.append(valid)
-
-    @property
-    def n_samples(self) -> int:
-        return self._n
-
-    @property
-    def at_frame(self) -> bool:
-        """True when the last recorded sample was a camera frame (a clean end of the grid)."""
-        return self._n > 0 and (self._n - 1) % self.k == 0
-
-    def demonstration(self, skill: str, seed: int, X_WO_true: RigidTransform, success: bool,
-                      metadata: dict) -> Demonstration:
-        """Assembles the recorded samples into a Demonstration (times start at 0)."""
-        if not self.at_frame:
-            raise ValueError("recording must end on a camera frame (call sample() until at_frame)")
-        times = np.arange(self._n) / self.record_hz
-        X_WO = pose_to_vector(X_WO_true)
-        X_OE_raw = object_frame_poses(X_WO, np.array(self.X_WE))
-        idx, t10, X_OE = downsample_action(times, X_OE_raw, self.action_hz)
-        perception = {}
-        if self.perception is not None:
-            if len(self.points) != idx.size:
-                raise AssertionError(f"{len(self.points)} camera frames for {idx.size} 10 Hz samples")
-            if self.X_WO_perceived is None:
-                raise ValueError(f"{skill} seed {seed}: the segmentation found the object in none of "
-                                 f"the {len(self.points)} camera frames")
-            perception = dict(object_points=np.stack(self.points).astype(np.float32),
-                              perception_valid=np.array(self.valid, dtype=bool),
-                              X_WO_start=self.X_WO_perceived)
-            metadata = dict(metadata, X_WO_start_frame=int(self.X_WO_frame))
-        obj = np.array(self.obj)
-        return Demonstration(
-            skill=skill, seed=int(seed), success=bool(success), final_object_state=float(obj[-1]),
-            times_100hz=times, X_OE_100hz=X_OE_raw, q_100hz=np.array(self.q),
-            gripper_100hz=np.array(self.grip), object_state_100hz=obj,
-            times=t10, X_OE=X_OE, X_WO_true=X_WO, metadata=metadata, **perception)
-
-
-def make_perception(station) -> DemonstrationPerception:
-    """Segmentation matched to the station (image size, camera rate, nominal object pose)."""
-    from drake_skill.perception.systems import segmenter_config_for_station
-
-    return DemonstrationPerception(segmenter_config_for_station(station.config))
+def demonstration_from(recorder: StationRecorder, skill: str, seed: int, X_WO_true: RigidTransform,
+                       success: bool, metadata: dict) -> Demonstration:
+    """Assembles a :class:`~drake_skill.station.simulation.StationRecorder`'s samples
+    (record_hz, frames at action_hz; with perception, the ObjectSegmenter's
+    points) into a Demonstration (times start at 0)."""
+    if not recorder.at_frame:
+        raise ValueError("recording must end on a camera frame (call sample() until at_frame)")
+    if recorder.frame_hz is None:
+        raise ValueError("a demonstration recorder needs frame_hz (the 10 Hz action instants)")
+    times = np.arange(recorder.n_samples) / recorder.record_hz
+    X_WO = pose_to_vector(X_WO_true)
+    X_OE_raw = object_frame_poses(X_WO, np.array(recorder.X_WE))
+    idx, t10, X_OE = downsample_action(times, X_OE_raw, recorder.frame_hz)
+    perception = {}
+    if recorder.segmenter is not None:
+        if len(recorder.points) != idx.size:
+            raise AssertionError(f"{len(recorder.points)} camera frames for {idx.size} 10 Hz samples")
+        if recorder.X_WO_perceived is None:
+            raise ValueError(f"{skill} seed {seed}: the segmentation found the object in none of "
+                             f"the {len(recorder.points)} camera frames")
+        perception = dict(object_points=np.stack(recorder.points).astype(np.float32),
+                          perception_valid=np.array(recorder.valid, dtype=bool),
+                          X_WO_start=recorder.X_WO_perceived)
+        metadata = dict(metadata, X_WO_start_frame=int(recorder.X_WO_frame))
+    obj = np.array(recorder.obj)
+    metadata = dict(metadata, peak_contact_force_N=float(np.max(recorder.force)))
+    return Demonstration(
+        skill=skill, seed=int(seed), success=bool(success), final_object_state=float(obj[-1]),
+        times_100hz=times, X_OE_100hz=X_OE_raw, q_100hz=np.array(recorder.q),
+        gripper_100hz=np.array(recorder.grip), object_state_100hz=obj,
+        times=t10, X_OE=X_OE, X_WO_true=X_WO, metadata=metadata, **perception)
 
 
 # --------------------------------------------------------------------------- demonstrator
@@ -402,7 +269,7 @@ class ScriptedDemonstrator:
             station_config.enable_camera = False
         elif not station_config.enable_camera:
             raise ValueError("record_perception needs a station with enable_camera = true")
-        self.sim = StationSimulation(station_config, meshcat=meshcat)
+        self.sim = StationSimulation(station_config, meshcat=meshcat, perceive=self.config.record_perception)
 
     def record(self, seed: int) -> Demonstration:
         """One demonstration on the object pose and variation drawn from ``seed``.
@@ -414,19 +281,17 @@ class ScriptedDemonstrator:
         X_WO = sim.reset(seed)
         plan, variation = humanlike_plan(self.skill, X_WO, sim.home_pose(), seed, config)
         sim.set_plan(plan)
-        perception = make_perception(sim.station) if config.record_perception else None
-        recorder = StationRecorder(sim.station, sim.context, sim.simulator, config.record_hz,
-                                   config.action_hz, perception)
+        recorder = sim.recorder(config.record_hz, config.action_hz)
         recorder.anchor()
-        duration = plan.duration + config.settle_time
+        duration = plan.duration + max(config.settle_time, sim.config.success.settle_time)
         n = int(math.ceil(duration * config.action_hz - 1e-9)) * recorder.k + 1
         for _ in range(n):
             recorder.sample(plan.opening(recorder.next_time()))
-        success = sim.judge(self.skill, recorder.obj[-1])
+        success = judge_run(self.skill, recorder.times, recorder.obj, recorder.force, sim.config.success)
         metadata = {"source": "scripted", "variation": variation,
                     "demonstrator_config": dc.asdict(config),
                     "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
-        return recorder.demonstration(self.skill, seed, X_WO, success, metadata)
+        return demonstration_from(recorder, self.skill, seed, X_WO, success, metadata)
 
     def record_many(self, count: int | None = None, progress: bool = True,
                     on_attempt: Callable[[int, Demonstration], None] | None = None) -> list[Demonstration]:

@@ -3,7 +3,8 @@
 The thesis' demonstrator moves the robot's hand by hand (section 6.2). In
 simulation the user drives the hand's desired pose from the Meshcat page
 instead, and the demonstration is recorded exactly as the scripted
-demonstrator records one (``drake_skill.demos.demonstrator.StationRecorder``):
+demonstrator records one (``drake_skill.station.simulation.StationRecorder``,
+the station's one recording loop, with the diagram's ``ObjectSegmenter``):
 the measured hand pose in the object frame at 100 Hz and 10 Hz, the
 segmented object cloud at 10 Hz.
 
@@ -44,7 +45,6 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 
-from drake_skill.station.success import judge_success
 
 IDLE, RECORDING, DONE = 0, 1, 2
 MODE_NAMES = {IDLE: "idle", RECORDING: "recording", DONE: "done"}
@@ -305,6 +305,10 @@ class TeleopSession:
             meshcat, X_WE_home, self.config, self.station.config.gripper_home))
         builder.Connect(self.teleop.GetOutputPort("X_WE_desired"), self.station.GetInputPort("ee_pose_desired"))
         builder.Connect(self.teleop.GetOutputPort("gripper_command"), self.station.GetInputPort("gripper_command"))
+        self.segmenter = None
+        if self.config.record_perception:
+            from drake_skill.perception.systems import add_object_segmenter
+            self.segmenter = add_object_segmenter(builder, self.station)
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         self.simulator = Simulator(self.diagram, self.context)
@@ -332,23 +336,29 @@ class TeleopSession:
         Raises TimeoutError if Record is not pressed within ``max_wait``.
         """
         from drake_skill.demos.format import MIN_SAMPLES
-        from drake_skill.demos.demonstrator import StationRecorder, make_perception
+        from drake_skill.demos.demonstrator import demonstration_from
+        from drake_skill.station.simulation import StationRecorder
+        from drake_skill.station.success import judge_run
 
         config = self.config
         X_WO = self.reset(seed)
         self.simulator.set_target_realtime_rate(config.realtime_rate)
         status(f"[{self.skill}, seed {seed}] drive the hand to the start, then press "
                f"{RECORD_BUTTON}; {STOP_BUTTON} ends the demonstration")
+        # Idle: the same loop (reflex, solver and divergence checks), nothing kept.
+        idle = StationRecorder(self.station, self.context, self.simulator, 1.0 / config.period)
+        idle.anchor()
         while self.mode() == IDLE:
             t = self.context.get_time()
             if t > config.max_wait:
                 raise TimeoutError(f"{RECORD_BUTTON} was not pressed within {config.max_wait} s")
             if user is not None:
                 user(t)
-            self.simulator.AdvanceTo(t + config.period)
-        perception = make_perception(self.station) if config.record_perception else None
-        recorder = StationRecorder(self.station, self.context, self.simulator, 100.0, 10.0,
-                                   perception)
+            idle.sample()
+            if idle.n_samples > 1000:
+                idle.reset()
+                idle.anchor()
+        recorder = StationRecorder(self.station, self.context, self.simulator, 100.0, 10.0, self.segmenter)
         t_start = recorder.anchor()
         status(f"recording from t = {t_start:.2f} s")
         gripper = self.teleop.GetOutputPort("gripper_command")
@@ -361,11 +371,11 @@ class TeleopSession:
             done = self.mode() == DONE or recorder.next_time() - t_start > config.max_duration
             if done and recorder.at_frame and recorder.n_samples >= min_raw:
                 break
-        success = judge_success(self.skill, recorder.obj[-1], self.station.config.success)
+        success = judge_run(self.skill, recorder.times, recorder.obj, recorder.force, self.station.config.success)
         metadata = {"source": "interactive", "teleop_config": dc.asdict(config),
                     "recording_started_at_s": t_start,
                     "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
-        demo = recorder.demonstration(self.skill, seed, X_WO, success, metadata)
+        demo = demonstration_from(recorder, self.skill, seed, X_WO, success, metadata)
         status(f"recorded {demo.duration:.1f} s: {'success' if success else 'FAILURE'} "
                f"(final object state {demo.final_object_state:.3f})")
         return demo

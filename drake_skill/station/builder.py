@@ -19,64 +19,83 @@ outputs
     ``object_state``     [1] lid angle [rad] or drawer travel [m]: ground truth,
                          simulation only, used to judge success, never to reward.
 
-Physics choices (documented here because they decide what a skill must do):
+Physics choices (documented here because they decide what a skill must do;
+the values are the scenario's, ``drake_skill.station.config``):
 
-* The plant is discrete (SAP) with point contact.
+* The plant is discrete (SAP) with point contact; every surface's friction,
+  stiffness and dissipation are set from ``config.contact``.
 * The Panda's joints are driven by SAP's implicit PD controllers (joint
-  impedance), with gravity disabled on the arm: the real Panda's controller
-  compensates gravity internally, so the commanded impedance acts alone.
-* Gravity is disabled on the object too, and its joints are damped: the lid
-  and drawer stay wherever they were left, as a stiff friction hinge would
-  hold them, so a skill succeeds only by moving them through contact.
+  impedance) around the rate-limited command of the end-effector controller.
+  Gravity acts on the arm and hand, and a feed-forward torque tau_g(q)
+  (``InverseDynamics`` in gravity-compensation mode on an arm + hand model)
+  cancels it, as the real Panda's controller does internally; SAP clamps
+  PD + feed-forward to each joint's effort limit, so the torque gravity needs
+  counts against it.
+* Gravity acts on the object's moving part (``object.gravity``); its hinge or
+  slide has light viscous damping and Coulomb friction (an implicit PD
+  actuator with zero stiffness whose force is clamped to the friction).
 * The object's base is a free body placed at the (randomised) pose and
-  locked there: it does not slide when pushed.
+  locked there: it does not slide when pushed (the collision reflex keeps
+  the pushes below what a real box would slide at).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from pydrake.geometry import (
-    ClippingRange,
-    ColorRenderCamera,
-    DepthRange,
-    DepthRenderCamera,
+    AddContactMaterial,
+    CollisionFilterDeclaration,
+    GeometrySet,
     MakeRenderEngineVtk,
     MeshcatVisualizer,
     MeshcatVisualizerParams,
-    RenderCameraCore,
+    ProximityProperties,
     RenderEngineVtkParams,
     Role,
+    RoleAssign,
 )
-from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
+from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
-from pydrake.multibody.tree import PdControllerGains
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
+from pydrake.multibody.tree import BodyIndex, PdControllerGains
 from pydrake.perception import BaseField, DepthImageToPointCloud
+from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantValueSource, MatrixGain
-from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
+from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource, Demultiplexer, MatrixGain, Multiplexer
+from pydrake.systems.sensors import PixelType, RgbdSensor
 from pydrake.common.value import AbstractValue, Value
 
-from drake_skill.common import look_at
-from drake_skill.station.controller import X_FLANGE_HAND, X_HAND_TCP, EndEffectorController
+from drake_skill.station.controller import X_FLANGE_HAND, X_HAND_TCP, EndEffectorController, make_finger_limiter
 from drake_skill.station.models import add_package_paths, model_url
 from drake_skill.station.config import StationConfig, validate_station_config
 
-RENDERER = "vtk"
-
-# Per object kind: SDF file, base body, articulated joint, body whose frame is O.
+# Per object kind: SDF file, base body, articulated joint.
 _OBJECTS = {
     "box": ("box.sdf", "box_base", "lid_hinge"),
     "drawer": ("drawer.sdf", "cabinet", "drawer_slide"),
 }
+# Which ContactConfig surface each collision geometry gets: (body name, geometry
+# name fragment, "" for any of the body's geometries, surface); panda_link* -> arm.
+_SURFACES = (
+    ("panda_leftfinger", "", "finger_pads"), ("panda_rightfinger", "", "finger_pads"),
+    ("panda_hand", "", "hand_housing"), ("table_top", "", "table"),
+    ("box_base", "", "box"), ("box_lid", "", "lid"), ("cabinet", "", "cabinet"),
+    ("drawer", "handle", "handle"), ("drawer", "standoff", "handle"), ("drawer", "", "drawer"),
+)
 
 
-def kinect_camera_info(camera) -> CameraInfo:
-    """Pinhole intrinsics from the horizontal and vertical fields of view."""
-    fx = camera.width / 2 / np.tan(np.deg2rad(camera.fov_x_deg) / 2)
-    fy = camera.height / 2 / np.tan(np.deg2rad(camera.fov_y_deg) / 2)
-    return CameraInfo(camera.width, camera.height, fx, fy,
-                      camera.width / 2 - 0.5, camera.height / 2 - 0.5)
+def make_gravity_plant() -> MultibodyPlant:
+    """Arm + hand (9 DoF: joints 1..7, fingers) as the station has them, for gravity compensation."""
+    plant = MultibodyPlant(time_step=0.0)
+    parser = Parser(plant)
+    add_package_paths(parser.package_map())
+    arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
+    hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
+    plant.WeldFrames(plant.GetFrameByName("panda_link8", arm), plant.GetFrameByName("panda_hand", hand),
+                     X_FLANGE_HAND)
+    plant.Finalize()
+    return plant
 
 
 class _FramePose(LeafSystem):
@@ -100,17 +119,15 @@ class Station(Diagram):
 
     Besides the ports it keeps handles a runner needs between rollouts:
     ``plant``, ``scene_graph``, ``config``, ``object_base`` (the locked free
-    body) and ``object_joint`` (lid hinge or drawer slide).
+    body), ``object_joint`` (lid hinge or drawer slide), ``ee_controller``,
+    ``gripper`` (the finger rate limiter) and ``robot_bodies`` (indices).
     """
 
     def __init__(self, config: StationConfig, meshcat=None):
         super().__init__()
         self.config = validate_station_config(config)
         builder = DiagramBuilder()
-        plant_config = MultibodyPlantConfig(
-            time_step=config.time_step, contact_model="point",
-            discrete_contact_approximation="sap")
-        plant, scene_graph = AddMultibodyPlant(plant_config, builder)
+        plant, scene_graph = AddMultibodyPlant(config.plant, builder)
         self.plant, self.scene_graph = plant, scene_graph
         parser = Parser(plant)
         add_package_paths(parser.package_map())
@@ -124,12 +141,13 @@ class Station(Diagram):
         plant.WeldFrames(plant.GetFrameByName("panda_link8", arm),
                          plant.GetFrameByName("panda_hand", hand), X_FLANGE_HAND)
         plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
-        for instance in (arm, hand, obj):
-            plant.set_gravity_enabled(instance, False)
+        plant.set_gravity_enabled(obj, bool(config.object.gravity))
         self.panda, self.hand, self.object_instance = arm, hand, obj
         self.object_base = plant.GetBodyByName(base_name, obj)
         self.object_joint = plant.GetJointByName(joint_name, obj)
         plant.SetDefaultFloatingBaseBodyPose(self.object_base, self.nominal_object_pose())
+        self.object_joint.set_default_damping(config.object.joint_damping)
+        self._set_contact_properties()
 
         ctrl = config.controller
         for i in range(7):
@@ -138,6 +156,11 @@ class Station(Diagram):
         for side in ("left", "right"):
             actuator = plant.GetJointActuatorByName(f"panda_finger_joint_{side}", hand)
             actuator.set_controller_gains(PdControllerGains(p=ctrl.finger_kp, d=ctrl.finger_kd))
+        # Coulomb friction of the object's joint: zero stiffness, damping
+        # joint_friction_gain, force clamped to joint_friction (SAP's PD clamp).
+        friction = plant.AddJointActuator(f"{joint_name}_friction", self.object_joint,
+                                          effort_limit=max(config.object.joint_friction, 1e-9))
+        friction.set_controller_gains(PdControllerGains(p=0.0, d=config.object.joint_friction_gain))
         plant.Finalize()
 
         q_home = np.asarray(config.q_home, dtype=float)
@@ -145,26 +168,49 @@ class Station(Diagram):
         plant.SetDefaultPositions(hand, [config.gripper_home / 2] * 2)
         self._set_default_object_joint(config.object.initial_joint)
 
-        # Robot-internal collisions cannot happen with the IK limits in force;
+        # Robot-internal collisions cannot happen with the IK limits in force
+        # (and the model has no overlapping robot geometry at q_home, tested);
         # filtering them saves contact queries every step.
-        from pydrake.geometry import CollisionFilterDeclaration, GeometrySet
+        self.robot_bodies = {int(b) for instance in (arm, hand) for b in plant.GetBodyIndices(instance)}
         robot_geoms = []
-        for instance in (arm, hand):
-            for body_index in plant.GetBodyIndices(instance):
-                robot_geoms += plant.GetCollisionGeometriesForBody(plant.get_body(body_index))
+        for body_index in sorted(self.robot_bodies):
+            robot_geoms += plant.GetCollisionGeometriesForBody(plant.get_body(BodyIndex(body_index)))
         scene_graph.collision_filter_manager().Apply(
             CollisionFilterDeclaration().ExcludeWithin(GeometrySet(robot_geoms)))
 
-        # Hand pose in, joint impedance set points out.
+        # Hand pose in, rate-limited joint impedance set points out.
         controller = builder.AddNamedSystem("ee_controller", EndEffectorController(ctrl, q_home))
         self.ee_controller = controller
         builder.Connect(controller.GetOutputPort("panda_state_desired"),
                         plant.get_desired_state_input_port(arm))
         builder.ExportInput(controller.GetInputPort("X_WE_desired"), "ee_pose_desired")
-        # Opening w -> each finger at w/2, zero velocity.
-        gripper = builder.AddNamedSystem("gripper", MatrixGain(np.array([[0.5], [0.5], [0.0], [0.0]])))
-        builder.Connect(gripper.get_output_port(), plant.get_desired_state_input_port(hand))
-        builder.ExportInput(gripper.get_input_port(), "gripper_command")
+        builder.ExportOutput(controller.GetOutputPort("joint_acceleration_commanded"),
+                             "joint_acceleration_commanded")
+        # Opening w -> each finger at w/2, at most the hand's finger speed.
+        gripper = builder.AddNamedSystem("gripper", make_finger_limiter(ctrl))
+        self.gripper = gripper
+        builder.Connect(gripper.GetOutputPort("finger_state_desired"), plant.get_desired_state_input_port(hand))
+        builder.ExportInput(gripper.GetInputPort("opening"), "gripper_command")
+        # Gravity compensation: tau_g(q) of arm + hand as feed-forward actuation.
+        self._gravity_plant = make_gravity_plant()
+        gravity = builder.AddNamedSystem("gravity_compensation", InverseDynamics(
+            self._gravity_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
+        mux = builder.AddNamedSystem("arm_hand_state", Multiplexer([14, 4]))
+        builder.Connect(plant.get_state_output_port(arm), mux.get_input_port(0))
+        builder.Connect(plant.get_state_output_port(hand), mux.get_input_port(1))
+        order = list(range(7)) + [14, 15] + list(range(7, 14)) + [16, 17]   # -> [q_arm, q_f, v_arm, v_f]
+        reorder = builder.AddNamedSystem("arm_hand_state_order", MatrixGain(np.eye(18)[order]))
+        builder.Connect(mux.get_output_port(), reorder.get_input_port())
+        builder.Connect(reorder.get_output_port(), gravity.get_input_port_estimated_state())
+        split = builder.AddNamedSystem("gravity_split", Demultiplexer([7, 2]))
+        builder.Connect(gravity.get_output_port_generalized_force(), split.get_input_port())
+        builder.Connect(split.get_output_port(0), plant.get_actuation_input_port(arm))
+        builder.Connect(split.get_output_port(1), plant.get_actuation_input_port(hand))
+        # The object's friction actuator: zero set point (velocity 0), no feed-forward.
+        hold = builder.AddNamedSystem("object_friction_setpoint", ConstantVectorSource(np.zeros(2)))
+        builder.Connect(hold.get_output_port(), plant.get_desired_state_input_port(obj))
+        zero = builder.AddNamedSystem("object_actuation", ConstantVectorSource(np.zeros(1)))
+        builder.Connect(zero.get_output_port(), plant.get_actuation_input_port(obj))
 
         # Measured outputs.
         builder.ExportOutput(plant.get_state_output_port(arm), "panda_state")
@@ -177,6 +223,7 @@ class Station(Diagram):
         builder.Connect(plant.get_state_output_port(), object_state.get_input_port())
         builder.ExportOutput(object_state.get_output_port(), "object_state")
         builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
+        builder.ExportOutput(plant.get_generalized_contact_forces_output_port(arm), "external_torque")
 
         if config.enable_camera:
             self._add_camera(builder)
@@ -186,16 +233,53 @@ class Station(Diagram):
         builder.BuildInto(self)
         self.set_name("station")
 
+    def _set_contact_properties(self) -> None:
+        """Replaces every collision geometry's proximity properties with its surface's."""
+        plant, contact = self.plant, self.config.contact
+        inspector = self.scene_graph.model_inspector()
+        for body_index in range(plant.num_bodies()):
+            body = plant.get_body(BodyIndex(body_index))
+            for gid in plant.GetCollisionGeometriesForBody(body):
+                name = inspector.GetName(gid)
+                surface = "arm" if body.name().startswith("panda_link") else None
+                for body_name, fragment, candidate in _SURFACES:
+                    if body.name() == body_name and fragment in name:
+                        surface = candidate
+                        break
+                if surface is None:
+                    raise AssertionError(f"no contact surface for geometry {name} of body {body.name()}")
+                s = getattr(contact, surface)
+                props = ProximityProperties()
+                AddContactMaterial(point_stiffness=s.stiffness, friction=CoulombFriction(s.friction, s.friction),
+                                   properties=props)
+                props.AddProperty("material", "relaxation_time", s.relaxation_time)
+                self.scene_graph.AssignRole(plant.get_source_id(), gid, props, RoleAssign.kReplace)
+
+    def robot_scene_contact(self, context) -> tuple[float, np.ndarray]:
+        """(sum of the robot-scene contact force magnitudes [N], external joint
+        torques of joints 1..7 [N m]) at the state in ``context`` (a root context
+        containing this station)."""
+        ctx = self.GetMyContextFromRoot(context)
+        results = self.GetOutputPort("contact_results").Eval(ctx)
+        force = 0.0
+        robot = self.robot_bodies
+        for i in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(i)
+            if (int(info.bodyA_index()) in robot) != (int(info.bodyB_index()) in robot):
+                force += float(np.linalg.norm(info.contact_force()))
+        tau = np.asarray(self.GetOutputPort("external_torque").Eval(ctx), dtype=float)
+        return force, tau
+
     # ------------------------------------------------------------------ camera
     def _add_camera(self, builder) -> None:
-        cam = self.config.camera
-        self.scene_graph.AddRenderer(RENDERER, MakeRenderEngineVtk(RenderEngineVtkParams(backend="EGL")))
-        info = kinect_camera_info(cam)
-        core = RenderCameraCore(RENDERER, info, ClippingRange(0.05, cam.depth_max + 1.0), RigidTransform())
-        color = ColorRenderCamera(core, show_window=False)
-        depth = DepthRenderCamera(core, DepthRange(cam.depth_min, cam.depth_max))
+        cam = self.config.camera        # Drake's CameraConfig: intrinsics, clipping, depth range, X_PB
+        renderer = cam.renderer_class if isinstance(cam.renderer_class, RenderEngineVtkParams) \
+            else RenderEngineVtkParams(backend="EGL")
+        self.scene_graph.AddRenderer(cam.renderer_name, MakeRenderEngineVtk(renderer))
+        color, depth = cam.MakeCameras()
+        info = color.core().intrinsics()
         world_id = self.plant.GetBodyFrameIdOrThrow(self.plant.world_body().index())
-        self._X_WC = RigidTransform(look_at(cam.position, cam.target))
+        self._X_WC = cam.X_PB.GetDeterministicValue()
         sensor = builder.AddNamedSystem("camera", RgbdSensor(world_id, self._X_WC, color, depth))
         builder.Connect(self.scene_graph.get_query_output_port(), sensor.query_object_input_port())
         # Rendering is on demand: an image or the cloud is rendered when a
@@ -266,13 +350,14 @@ class Station(Diagram):
     def reset(self, context, seed: int | None = None) -> RigidTransform:
         """Prepares a context that was just set to its defaults (``SetDefaultContext``)
         for a run: places the object at the pose drawn from ``seed`` (the nominal
-        pose when ``seed`` is None), locks it, and starts the hand controller at
-        the home joint positions. ``context`` is this station's or a root context
+        pose when ``seed`` is None), locks it, and starts the hand controller and
+        the finger rate limiter at rest at the home positions. ``context`` is this station's or a root context
         containing it. Returns X_WO.
         """
         X_WO = self.nominal_object_pose() if seed is None else self.random_object_pose(seed)
         self.set_object_pose(context, X_WO)
         self.ee_controller.set_joint_positions(context, self.config.q_home)
+        self.gripper.set_opening(context, self.config.gripper_home)
         return X_WO
 
 

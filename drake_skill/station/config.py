@@ -3,8 +3,13 @@
 (No ``from __future__ import annotations`` here: yaml_load_typed reads the
 field types at run time.)
 
-A scenario file names the object on the table, the camera, the controller and
-the success thresholds; code never hard-codes them. Units are SI (m, rad, s).
+A scenario names the plant (Drake's ``MultibodyPlantConfig``), the object on
+the table and its joint physics, the contact parameters of every surface, the
+camera (Drake's ``CameraConfig``), the controller, the collision reflex and
+the success judges; code never hard-codes them. The Open, Close and Draw
+scenarios ship as YAML files in ``drake_skill/station/scenarios/``
+(:func:`scenario_for_skill`); a user's own file loads with
+:func:`load_station_config`. Units are SI (m, rad, s, kg, N).
 ``load_station_config`` turns every problem into a ``ValueError`` that names
 the offending field.
 """
@@ -14,22 +19,42 @@ import dataclasses as dc
 import math
 from pathlib import Path
 
-from pydrake.common.yaml import yaml_load_typed
+import numpy as np
+from pydrake.common.schema import Transform
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.geometry import RenderEngineVtkParams
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.systems.sensors import CameraConfig
 
-from drake_skill.common import SKILLS
+from drake_skill.common import SKILLS, look_at
+from drake_skill.station import limits
 
 OBJECT_KINDS = ("box", "drawer")
+SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
+#: The camera's pose: 1.3 m in front and 0.7 m to the right of the robot's base, 0.8 m up.
+CAMERA_POSITION = (1.30, -0.70, 0.80)
+CAMERA_TARGET = (0.52, 0.0, 0.06)
 
 
 @dc.dataclass
 class ObjectConfig:
-    """The articulated object on the table and how its pose is randomised.
+    """The articulated object on the table, its joint physics and how its pose is randomised.
 
     kind: "box" (hinged lid, skills open/close) or "drawer" (skill draw).
     x, y, yaw: nominal pose of the object's base frame O on the table [m, rad].
     initial_joint: lid angle [rad] or drawer travel [m] at the start of a run.
     randomize_xy: half-width of the uniform translation noise per axis [m].
     randomize_yaw: half-width of the uniform yaw noise [rad].
+    gravity: gravity acts on the object (its base is locked to the table).
+    joint_damping: viscous damping of the lid hinge [N m s/rad] or the drawer
+      slide [N s/m].
+    joint_friction: Coulomb friction of the hinge [N m] or slide [N], modelled
+      as SAP's implicit PD constraint with zero stiffness, damping
+      ``joint_friction_gain`` and its force clamped to ``joint_friction``: the
+      regularised Coulomb law tau = -clamp(d v, -tau_c, tau_c).
+    joint_friction_gain: the regularisation's slope d [N m s/rad or N s/m];
+      |v| above tau_c / d slides at the full friction.
     """
 
     kind: str = "box"
@@ -39,37 +64,87 @@ class ObjectConfig:
     initial_joint: float = 0.0
     randomize_xy: float = 0.02
     randomize_yaw: float = 0.08
+    gravity: bool = True
+    joint_damping: float = 0.005
+    joint_friction: float = 0.01
+    joint_friction_gain: float = 1.0
 
 
 @dc.dataclass
-class CameraConfig:
-    """An RGB-D camera modelled on the Microsoft Kinect v1.
+class SurfaceConfig:
+    """Point-contact parameters of one surface (Drake's proximity properties).
 
-    640 x 480 pixels, 57 x 43 degrees field of view, 10 Hz (the thesis samples
-    perception at 10 Hz, docs/method.md section 1), depth range [depth_min, depth_max] m.
-    The camera sits at ``position`` and looks at ``target`` (world frame, m).
+    friction: Coulomb coefficient (static = dynamic; SAP uses the dynamic one).
+      Drake combines two surfaces' coefficients as 2 mu_a mu_b / (mu_a + mu_b).
+    stiffness: point-contact stiffness [N/m] (Drake combines two in series).
+    relaxation_time: SAP's linear dissipation time scale [s].
     """
 
-    width: int = 640
-    height: int = 480
-    fov_x_deg: float = 57.0
-    fov_y_deg: float = 43.0
-    fps: float = 10.0
-    depth_min: float = 0.5
-    depth_max: float = 4.0
-    position: list[float] = dc.field(default_factory=lambda: [1.30, -0.70, 0.80])
-    target: list[float] = dc.field(default_factory=lambda: [0.52, 0.0, 0.06])
+    friction: float = 0.5
+    stiffness: float = 1e5
+    relaxation_time: float = 0.01
+
+
+def _surface(friction, stiffness=1e5, relaxation_time=0.01):
+    return dc.field(default_factory=lambda: SurfaceConfig(friction, stiffness, relaxation_time))
+
+
+@dc.dataclass
+class ContactConfig:
+    """Contact parameters per surface. Values: rubber-padded fingers on painted
+    wood or plastic mu ~ 1, the hand's plastic housing and the arm's painted
+    links mu ~ 0.3, the painted box, lid, drawer and handle mu ~ 0.5, the wooden
+    table mu ~ 0.6. Stiffness 1e5 N/m per surface (5e4 N/m for two in series)
+    keeps a 30 N push to 0.6 mm of penetration."""
+
+    finger_pads: SurfaceConfig = _surface(1.0)
+    hand_housing: SurfaceConfig = _surface(0.3)
+    arm: SurfaceConfig = _surface(0.3)
+    lid: SurfaceConfig = _surface(0.5)
+    box: SurfaceConfig = _surface(0.5)
+    drawer: SurfaceConfig = _surface(0.5)
+    handle: SurfaceConfig = _surface(0.5)
+    cabinet: SurfaceConfig = _surface(0.5)
+    table: SurfaceConfig = _surface(0.6)
+
+
+def default_camera() -> CameraConfig:
+    """A Microsoft Kinect v1 (the thesis' camera): 640 x 480 pixels, 57 x 43 degrees
+    field of view, depth 0.5-4 m, 10 Hz (the thesis samples perception at 10 Hz,
+    docs/method.md section 1), fixed in the world looking at the table."""
+    camera = CameraConfig()
+    camera.name = "kinect"
+    camera.width, camera.height, camera.fps = 640, 480, 10.0
+    camera.focal = CameraConfig.FovDegrees(x=57.0, y=43.0)
+    camera.clipping_near, camera.clipping_far = 0.05, 5.0
+    camera.z_near, camera.z_far = 0.5, 4.0
+    camera.X_PB = Transform(RigidTransform(look_at(CAMERA_POSITION, CAMERA_TARGET)))
+    camera.renderer_name = "vtk"
+    camera.renderer_class = RenderEngineVtkParams(backend="EGL")
+    camera.rgb, camera.depth, camera.label = True, True, True
+    return camera
+
+
+def default_plant() -> MultibodyPlantConfig:
+    """Discrete plant with SAP (the implicit PD actuators and the friction need it), point contact."""
+    return MultibodyPlantConfig(time_step=0.002, contact_model="point",
+                                discrete_contact_approximation="sap")
 
 
 @dc.dataclass
 class ControllerConfig:
-    """End-effector controller (differential IK) and joint impedance gains.
+    """End-effector controller (differential IK), rate limiter and joint impedance gains.
 
     diff_ik_period: integration period of differential IK [s].
     velocity_scale: fraction of the Panda's joint velocity limits IK may use.
     ee_speed_max: Cartesian speed limit of the hand [m/s].
+    limiter_period: period of the joint rate limiter [s] (libfranka's: 1 ms).
+    limiter_bandwidth: natural frequency [rad/s] of the limiter's critically
+      damped tracking of the IK's joint positions.
     kp, kd: joint stiffness [N m/rad] and damping [N m s/rad] of the impedance
-      controller (SAP implicit PD on each actuator), joints 1..7.
+      controller (SAP implicit PD on each actuator), joints 1..7; defaults are
+      libfranka's joint impedance example (``examples/joint_impedance_control``
+      uses 600, 600, 600, 600, 250, 150, 50 and 50, 50, 50, 20, 20, 20, 10).
     finger_kp, finger_kd: the same for the two prismatic fingers [N/m, N s/m].
     joint_centering_gain: pull of the redundant joint motion toward q_home
       [1/s] (differential IK's secondary objective).
@@ -78,94 +153,199 @@ class ControllerConfig:
     diff_ik_period: float = 0.01
     velocity_scale: float = 0.8
     ee_speed_max: float = 0.6
-    kp: list[float] = dc.field(default_factory=lambda: [3000.0] * 4 + [1000.0] * 3)
-    kd: list[float] = dc.field(default_factory=lambda: [150.0] * 4 + [40.0] * 3)
+    limiter_period: float = 0.001
+    limiter_bandwidth: float = 40.0
+    kp: list[float] = dc.field(default_factory=lambda: [600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0])
+    kd: list[float] = dc.field(default_factory=lambda: [50.0, 50.0, 50.0, 20.0, 20.0, 20.0, 10.0])
     finger_kp: float = 2000.0
     finger_kd: float = 40.0
     joint_centering_gain: float = 1.0
 
 
 @dc.dataclass
-class SuccessConfig:
-    """Ground-truth success thresholds (simulation only, never a reward).
+class ReflexConfig:
+    """The Panda's collision reflex (defaults and sources: ``drake_skill.station.limits``).
 
-    open_min: lid angle at the end at least this [rad].
-    close_max: lid angle at the end at most this [rad].
-    draw_min: drawer travel at the end at least this [m].
+    enabled: crossing a limit ends the run with ``ReflexError``.
+    contact_force_max: limit on the sum of the robot-scene contact force magnitudes [N].
+    external_torque_max: limit on each joint's external torque (the contact
+      forces' generalized force on joints 1..7) [N m].
+    filter_time: both are compared after a first-order low-pass filter of
+      this time constant [s], as the robot compares its filtered estimates
+      (a contact impulse over one plant step is not a sustained force).
     """
 
-    open_min: float = 1.2
-    close_max: float = 0.15
+    enabled: bool = True
+    filter_time: float = 0.01
+    contact_force_max: float = limits.REFLEX_FORCE_N
+    external_torque_max: list[float] = dc.field(default_factory=lambda: limits.REFLEX_TORQUE_NM.tolist())
+
+
+@dc.dataclass
+class SuccessConfig:
+    """Ground-truth success judges (simulation only, never a reward).
+
+    All are read at the end of a settle phase of ``settle_time`` s in which the
+    hand holds still away from the object (no robot-object contact in it).
+    open_min: lid angle at the end at least this [rad]: past the tipping
+      angle, so that the lid stays open by its weight for the settle time.
+    close_max: lid angle at the end at most this [rad] (shut).
+    draw_min: drawer travel at the end at least this [m].
+    settle_time: length of the settle phase [s].
+    """
+
+    open_min: float = 1.7
+    close_max: float = 0.05
     draw_min: float = 0.10
+    settle_time: float = 1.0
 
 
 @dc.dataclass
 class StationConfig:
     """Everything ``build_station`` needs.
 
-    time_step: MultibodyPlant discrete step (SAP) [s]. 4 ms keeps the
-      station with its camera above 3x real time on 2 cores; the scripted
-      skills succeed at 2, 3 and 4 ms.
+    plant: Drake's MultibodyPlantConfig (time step, contact model, SAP...).
     q_home: the Panda's initial joint positions [rad].
     gripper_home: initial finger opening (distance between fingers) [m].
     enable_camera: add the RGB-D camera and its point cloud.
     """
 
-    time_step: float = 0.004
+    plant: MultibodyPlantConfig = dc.field(default_factory=default_plant)
     q_home: list[float] = dc.field(
         default_factory=lambda: [0.0, -0.6, 0.0, -2.4, 0.0, 1.8, 0.785])
     gripper_home: float = 0.0
     enable_camera: bool = True
     object: ObjectConfig = dc.field(default_factory=ObjectConfig)
-    camera: CameraConfig = dc.field(default_factory=CameraConfig)
+    contact: ContactConfig = dc.field(default_factory=ContactConfig)
+    camera: CameraConfig = dc.field(default_factory=default_camera)
     controller: ControllerConfig = dc.field(default_factory=ControllerConfig)
+    reflex: ReflexConfig = dc.field(default_factory=ReflexConfig)
     success: SuccessConfig = dc.field(default_factory=SuccessConfig)
+
+    @property
+    def time_step(self) -> float:
+        """The plant's discrete step [s] (``plant.time_step``)."""
+        return self.plant.time_step
+
+
+# ----------------------------------------------------------------------------- validation
+def _bad(field: str, value, expected: str):
+    raise ValueError(f"station config field '{field}' = {value!r}: expected {expected}")
+
+
+def _number(field, value, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False, what="a number"):
+    """Checks lo <= value <= hi (open ends where asked) and finiteness."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        _bad(field, value, what)
+    ok = math.isfinite(v) and (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+    if not ok:
+        lo_s = "(" if lo_open else "["
+        hi_s = ")" if hi_open else "]"
+        _bad(field, value, f"{what} in {lo_s}{lo}, {hi}{hi_s}")
+    return v
+
+
+def _vector(field, values, n, lo=-math.inf, hi=math.inf, lo_open=False, what="numbers"):
+    if len(values) != n:
+        _bad(field, values, f"{n} {what}")
+    for i, v in enumerate(values):
+        _number(f"{field}[{i}]", v, lo, hi, lo_open=lo_open, what=what)
 
 
 def validate_station_config(config: StationConfig) -> StationConfig:
-    """Raises ValueError naming the field of ``config`` that cannot work."""
-    def bad(field: str, value, expected: str):
-        raise ValueError(f"station config field '{field}' = {value!r}: expected {expected}")
-
+    """Raises ValueError naming the field of ``config`` that cannot work; returns it."""
     if not isinstance(config, StationConfig):
         raise ValueError(f"config must be a StationConfig, got {type(config).__name__}")
-    if not 1e-4 <= config.time_step <= 0.01:
-        bad("time_step", config.time_step, "a plant step in [1e-4, 0.01] s")
-    if len(config.q_home) != 7 or not all(math.isfinite(q) for q in config.q_home):
-        bad("q_home", config.q_home, "7 finite joint angles [rad]")
-    if not 0.0 <= config.gripper_home <= 0.08:
-        bad("gripper_home", config.gripper_home, "a finger opening in [0, 0.08] m")
+    plant = config.plant
+    _number("plant.time_step", plant.time_step, 1e-4, 0.01, what="a plant step [s]")
+    if plant.discrete_contact_approximation != "sap":
+        _bad("plant.discrete_contact_approximation", plant.discrete_contact_approximation,
+             "'sap' (the implicit PD actuators and the joint friction need SAP)")
+    if plant.contact_model not in ("point", "hydroelastic", "hydroelastic_with_fallback"):
+        _bad("plant.contact_model", plant.contact_model, "point, hydroelastic or hydroelastic_with_fallback")
+    _number("plant.penetration_allowance", plant.penetration_allowance, 0, 0.1, lo_open=True, what="a length [m]")
+    _number("plant.stiction_tolerance", plant.stiction_tolerance, 0, 1, lo_open=True, what="a speed [m/s]")
+    _number("plant.sap_near_rigid_threshold", plant.sap_near_rigid_threshold, 0, 10, what="a threshold")
+    _vector("q_home", config.q_home, 7, what="finite joint angles [rad]")
+    for i, q in enumerate(config.q_home):
+        _number(f"q_home[{i}]", q, limits.Q_MIN[i], limits.Q_MAX[i], what="a joint angle within Franka's limits [rad]")
+    _number("gripper_home", config.gripper_home, 0.0, 2 * limits.FINGER_MAX, what="a finger opening [m]")
+
     obj = config.object
     if obj.kind not in OBJECT_KINDS:
-        bad("object.kind", obj.kind, f"one of {', '.join(OBJECT_KINDS)}")
-    if obj.randomize_xy < 0 or obj.randomize_yaw < 0:
-        bad("object.randomize_xy/randomize_yaw", (obj.randomize_xy, obj.randomize_yaw),
-            "non-negative noise half-widths")
-    upper = 2.2 if obj.kind == "box" else 0.22
-    if not 0.0 <= obj.initial_joint <= upper:
-        bad("object.initial_joint", obj.initial_joint, f"within the joint range [0, {upper}]")
+        _bad("object.kind", obj.kind, f"one of {', '.join(OBJECT_KINDS)}")
+    for name in ("x", "y", "yaw"):
+        _number(f"object.{name}", getattr(obj, name), what="a finite pose coordinate")
+    reach = math.hypot(obj.x, obj.y)
+    if not 0.35 <= reach <= 0.80:
+        _bad("object.x/object.y", (obj.x, obj.y),
+             "an object 0.35..0.80 m from the robot's base (the Panda's reach for these skills)")
+    _number("object.randomize_xy", obj.randomize_xy, 0.0, 0.1, what="a noise half-width [m]")
+    _number("object.randomize_yaw", obj.randomize_yaw, 0.0, math.pi / 4, what="a noise half-width [rad]")
+    upper = 1.9 if obj.kind == "box" else 0.22
+    _number("object.initial_joint", obj.initial_joint, 0.0, upper, what="a position within the joint range")
+    _number("object.joint_damping", obj.joint_damping, 0.0, 100.0, what="a damping")
+    _number("object.joint_friction", obj.joint_friction, 0.0, 100.0, what="a friction force/torque")
+    _number("object.joint_friction_gain", obj.joint_friction_gain, 0.0, 1e4, lo_open=True, what="a gain")
+
+    for f in dc.fields(ContactConfig):
+        s = getattr(config.contact, f.name)
+        _number(f"contact.{f.name}.friction", s.friction, 0.0, 3.0, lo_open=True, what="a friction coefficient")
+        _number(f"contact.{f.name}.stiffness", s.stiffness, 0.0, 1e9, lo_open=True, what="a stiffness [N/m]")
+        _number(f"contact.{f.name}.relaxation_time", s.relaxation_time, 0.0, 1.0, what="a time [s]")
+
     cam = config.camera
     if not (16 <= cam.width <= 4096 and 16 <= cam.height <= 4096):
-        bad("camera.width/height", (cam.width, cam.height), "16..4096 pixels each")
-    for name in ("fov_x_deg", "fov_y_deg"):
-        if not 1.0 <= getattr(cam, name) <= 170.0:
-            bad(f"camera.{name}", getattr(cam, name), "a field of view in [1, 170] degrees")
-    if not 0.1 <= cam.fps <= 120:
-        bad("camera.fps", cam.fps, "a frame rate in [0.1, 120] Hz")
-    if not 0 < cam.depth_min < cam.depth_max:
-        bad("camera.depth_min/depth_max", (cam.depth_min, cam.depth_max), "0 < depth_min < depth_max")
-    for name in ("position", "target"):
-        if len(getattr(cam, name)) != 3:
-            bad(f"camera.{name}", getattr(cam, name), "3 coordinates [m]")
-    if math.dist(cam.position, cam.target) < 1e-3:
-        bad("camera.target", cam.target, "a point away from camera.position")
+        _bad("camera.width/height", (cam.width, cam.height), "16..4096 pixels each")
+    if isinstance(cam.focal, CameraConfig.FovDegrees):
+        for name in ("x", "y"):
+            value = getattr(cam.focal, name)
+            if value is not None:
+                _number(f"camera.focal.{name}", value, 1.0, 170.0, what="a field of view [deg]")
+    else:
+        for name in ("x", "y"):
+            value = getattr(cam.focal, name)
+            if value is not None:
+                _number(f"camera.focal.{name}", value, 0.0, 1e5, lo_open=True, what="a focal length [pixels]")
+    _number("camera.fps", cam.fps, 0.1, 120.0, what="a frame rate [Hz]")
+    _number("camera.z_near", cam.z_near, 0.0, math.inf, lo_open=True, what="a depth [m]")
+    _number("camera.z_far", cam.z_far, cam.z_near, math.inf, lo_open=True, what="a depth beyond z_near [m]")
+    _number("camera.clipping_near", cam.clipping_near, 0.0, cam.z_near, lo_open=True,
+            what="a clipping distance up to z_near [m]")
+    _number("camera.clipping_far", cam.clipping_far, cam.z_far, math.inf, what="a clipping distance beyond z_far [m]")
+    X = np.asarray(cam.X_PB.GetDeterministicValue().GetAsMatrix4())
+    if not np.all(np.isfinite(X)):
+        _bad("camera.X_PB", X[:3, 3].tolist(), "a finite pose")
+    if cam.X_PB.base_frame not in (None, "", "world", "WorldBody"):
+        _bad("camera.X_PB.base_frame", cam.X_PB.base_frame, "the world (the camera is fixed)")
+
     ctrl = config.controller
-    if len(ctrl.kp) != 7 or len(ctrl.kd) != 7:
-        bad("controller.kp/kd", (ctrl.kp, ctrl.kd), "7 gains each")
-    if not 0 < ctrl.velocity_scale <= 1:
-        bad("controller.velocity_scale", ctrl.velocity_scale, "a fraction in (0, 1]")
-    if ctrl.diff_ik_period < config.time_step:
-        bad("controller.diff_ik_period", ctrl.diff_ik_period, "at least time_step")
+    _vector("controller.kp", ctrl.kp, 7, 0.0, 1e5, lo_open=True, what="positive stiffnesses [N m/rad]")
+    _vector("controller.kd", ctrl.kd, 7, 0.0, 1e4, what="non-negative dampings [N m s/rad]")
+    _number("controller.finger_kp", ctrl.finger_kp, 0.0, 1e6, lo_open=True, what="a stiffness [N/m]")
+    _number("controller.finger_kd", ctrl.finger_kd, 0.0, 1e4, what="a damping [N s/m]")
+    _number("controller.velocity_scale", ctrl.velocity_scale, 0.0, 1.0, lo_open=True, what="a fraction")
+    _number("controller.ee_speed_max", ctrl.ee_speed_max, 0.0, 2.0, lo_open=True, what="a speed [m/s]")
+    _number("controller.joint_centering_gain", ctrl.joint_centering_gain, 0.0, 100.0, what="a gain [1/s]")
+    _number("controller.diff_ik_period", ctrl.diff_ik_period, max(config.time_step, 1e-3), 0.1,
+            what="a period at least the plant step [s]")
+    _number("controller.limiter_period", ctrl.limiter_period, 1e-4, ctrl.diff_ik_period, what="a period [s]")
+    _number("controller.limiter_bandwidth", ctrl.limiter_bandwidth, 0.0, 0.5 / ctrl.limiter_period,
+            lo_open=True, what="a bandwidth [rad/s] below half the limiter rate")
+
+    ref = config.reflex
+    _number("reflex.contact_force_max", ref.contact_force_max, 0.0, 1e4, lo_open=True, what="a force [N]")
+    _number("reflex.filter_time", ref.filter_time, 0.0, 1.0, what="a time constant [s]")
+    _vector("reflex.external_torque_max", ref.external_torque_max, 7, 0.0, 1e3, lo_open=True,
+            what="positive torques [N m]")
+
+    suc = config.success
+    _number("success.open_min", suc.open_min, 0.0, 1.9, lo_open=True, what="a lid angle [rad]")
+    _number("success.close_max", suc.close_max, 0.0, 1.9, lo_open=True, what="a lid angle [rad]")
+    _number("success.draw_min", suc.draw_min, 0.0, 0.22, lo_open=True, what="a drawer travel [m]")
+    _number("success.settle_time", suc.settle_time, 0.0, 60.0, what="a duration [s]")
     return config
 
 
@@ -173,8 +353,8 @@ def load_station_config(path: str | Path | None = None, *, data: str | None = No
                         defaults: StationConfig | None = None) -> StationConfig:
     """Loads a StationConfig from a YAML file or string, then validates it.
 
-    Keys left out keep their defaults; an unknown key (a typo) is an error that
-    names it.
+    Keys left out keep their defaults (``defaults``, else the built-in
+    :class:`StationConfig`); an unknown key (a typo) is an error that names it.
     """
     if (path is None) == (data is None):
         raise ValueError("give exactly one of path= or data=")
@@ -182,30 +362,31 @@ def load_station_config(path: str | Path | None = None, *, data: str | None = No
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"station config {path}: no such file")
+    where = f"{path}" if path is not None else "YAML"
     try:
         config = yaml_load_typed(
             schema=StationConfig, filename=str(path) if path is not None else None,
             data=data, defaults=defaults or StationConfig())
     except RuntimeError as e:
-        where = f"{path}" if path is not None else "YAML"
         raise ValueError(f"station config ({where}): {e}") from e
-    return validate_station_config(config)
+    try:
+        return validate_station_config(config)
+    except ValueError as e:
+        raise ValueError(f"station config ({where}): {e}") from e
+
+
+def dump_station_config(config: StationConfig) -> str:
+    """The YAML text of ``config`` (every field written)."""
+    return yaml_dump_typed(config)
+
+
+def scenario_path(skill: str) -> Path:
+    if skill not in SKILLS:
+        raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
+    return SCENARIO_DIR / f"{skill}.yaml"
 
 
 def scenario_for_skill(skill: str) -> StationConfig:
-    """The default station for a skill: the box closed (open), open (close), or the drawer."""
-    if skill not in SKILLS:
-        raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
-    config = StationConfig()
-    # The box sits further away for Open than for Close: lifting the lip from
-    # the front needs the arm stretched, reaching behind the open lid needs it
-    # closer (the Panda's joint 4 and 6 limits bound both).
-    if skill == "open":
-        config.object.x = 0.62
-    elif skill == "close":
-        config.object.x = 0.52
-        config.object.initial_joint = 1.9
-    elif skill == "draw":
-        config.object.kind = "drawer"
-        config.object.x = 0.68
-    return config
+    """The shipped scenario of a skill (``scenarios/<skill>.yaml``): the box closed
+    (open), the lid resting open on its stay (close), or the drawer (draw)."""
+    return load_station_config(scenario_path(skill))

@@ -1,10 +1,13 @@
-"""The end-effector controller: hand pose in, joint position commands out.
+"""The end-effector controller: hand pose in, rate-limited joint commands out.
 
 Drake's ``DifferentialInverseKinematicsIntegrator`` solves, every period, the
 QP of differential IK (min ||J v - V_WE_desired||, subject to joint position
-and velocity limits) and integrates the joint velocities; a discrete
-derivative then turns the joint positions into the desired state [q, v] that
-the Panda's joint impedance controller tracks.
+and velocity limits) and integrates the joint velocities. A
+:class:`RateLimiter` then turns those joint positions into the commanded
+state [q_c, v_c] that the Panda's joint impedance tracks, with the joint
+velocity, acceleration and jerk bounded by Franka's published limits
+(``drake_skill.station.limits``), as ``libfranka``'s own rate limiter bounds
+every command the robot accepts. The same class limits the finger speed.
 """
 
 from __future__ import annotations
@@ -18,9 +21,9 @@ from pydrake.multibody.inverse_kinematics import (
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import FixedOffsetFrame
-from pydrake.systems.framework import Diagram, DiagramBuilder
-from pydrake.systems.primitives import StateInterpolatorWithDiscreteDerivative
+from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 
+from drake_skill.station import limits
 from drake_skill.station.models import add_package_paths, model_url
 from drake_skill.station.config import ControllerConfig
 
@@ -30,8 +33,11 @@ from drake_skill.station.config import ControllerConfig
 X_FLANGE_HAND = RigidTransform(RotationMatrix.MakeZRotation(-np.pi / 4))
 X_HAND_TCP = RigidTransform([0.0, 0.0, 0.1034])
 
-# Franka's published joint velocity limits [rad/s].
-PANDA_QD_MAX = np.array([2.175, 2.175, 2.175, 2.175, 2.61, 2.61, 2.61])
+# Kept for callers of the previous name; the one definition is limits.QD_MAX.
+PANDA_QD_MAX = limits.QD_MAX
+#: The fingers' acceleration bound used by the finger rate limiter [m/s^2]
+#: (not published by Franka; it only shapes the start and stop of a finger move).
+FINGER_ACCEL_MAX = 4.0
 
 
 def make_control_plant() -> MultibodyPlant:
@@ -47,12 +53,117 @@ def make_control_plant() -> MultibodyPlant:
     return plant
 
 
-class EndEffectorController(Diagram):
-    """Input ``X_WE_desired`` (RigidTransform), output ``panda_state_desired`` (14).
+class RateLimiter(LeafSystem):
+    """Tracks a position reference with bounded velocity, acceleration and jerk.
 
-    Joint limits are Franka's, shrunk by a 0.05 rad margin; velocity limits are
-    Franka's scaled by ``config.velocity_scale``; the hand's translational
-    speed is limited to ``config.ee_speed_max`` m/s.
+    Input ``reference`` (n): target positions r (held between updates, e.g. the
+    IK's 100 Hz output). Output ``state`` (2n): the commanded [q_c, v_c].
+    Every ``period`` h, with r_dot a first-order estimate of the reference's
+    velocity (time constant ``reference_period``),
+
+        a* = w^2 (r - q_c) + 2 w (r_dot - v_c)          (critically damped, w = bandwidth)
+        a  = clip(a*, a_prev - j_max h, a_prev + j_max h), clip to +-a_max,
+             and to (+-v_max - v_c) / h so that the velocity stays in bounds,
+        v_c <- v_c + a h,  q_c <- q_c + v_c h.
+
+    So |v_c| <= v_max and |a| <= a_max hold exactly; the jerk bound yields
+    only where the velocity bound brakes. State (discrete, per run): [q_c,
+    v_c, a, r_prev, r_dot]. ``reference_scale`` multiplies the reference (a
+    finger opening -> each finger's position) and ``lower``/``upper`` clip it.
+    """
+
+    def __init__(self, n: int, period: float, bandwidth: float, v_max, a_max, j_max,
+                 reference_period: float, reference_scale: float = 1.0, lower=None, upper=None):
+        super().__init__()
+        self._n, self._h, self._w = int(n), float(period), float(bandwidth)
+        self._v_max = np.broadcast_to(np.asarray(v_max, dtype=float), (n,)).copy()
+        self._a_max = np.broadcast_to(np.asarray(a_max, dtype=float), (n,)).copy()
+        self._j_max = np.broadcast_to(np.asarray(j_max, dtype=float), (n,)).copy()
+        self._tau_ref = float(reference_period)
+        self._scale = float(reference_scale)
+        self._lower = None if lower is None else np.broadcast_to(np.asarray(lower, float), (n,)).copy()
+        self._upper = None if upper is None else np.broadcast_to(np.asarray(upper, float), (n,)).copy()
+        self._ref = self.DeclareVectorInputPort("reference", n)
+        self._x = self.DeclareDiscreteState(5 * n)
+        self.DeclarePeriodicDiscreteUpdateEvent(self._h, 0.0, self._update)
+        self.DeclareVectorOutputPort("state", 2 * n, self._calc_state, {self.xd_ticket()})
+        self.DeclareVectorOutputPort("acceleration", n, self._calc_accel, {self.xd_ticket()})
+
+    def set_position(self, context, q) -> None:
+        """Starts the limiter at rest at positions q."""
+        n = self._n
+        q = np.asarray(q, dtype=float)
+        x = np.zeros(5 * n)
+        x[:n] = q
+        x[3 * n:4 * n] = q
+        context.get_mutable_discrete_state(self._x).SetFromVector(x)
+
+    def _reference(self, context):
+        r = self._scale * np.asarray(self._ref.Eval(context), dtype=float)
+        if self._lower is not None:
+            r = np.clip(r, self._lower, self._upper)
+        return r
+
+    def _update(self, context, discrete_state):
+        n, h, w = self._n, self._h, self._w
+        x = context.get_discrete_state(self._x).value()
+        q, v, a_prev, r_prev, r_dot = (x[i * n:(i + 1) * n] for i in range(5))
+        r = self._reference(context)
+        r_dot = r_dot + (h / max(self._tau_ref, h)) * ((r - r_prev) / h - r_dot)
+        a = w * w * (r - q) + 2.0 * w * (r_dot - v)
+        a = np.clip(a, a_prev - self._j_max * h, a_prev + self._j_max * h)
+        a = np.clip(a, -self._a_max, self._a_max)
+        a = np.clip(a, (-self._v_max - v) / h, (self._v_max - v) / h)
+        v_new = v + a * h
+        q_new = q + v_new * h
+        discrete_state.set_value(self._x, np.concatenate([q_new, v_new, a, r, r_dot]))
+
+    def _calc_state(self, context, output: BasicVector):
+        x = context.get_discrete_state(self._x).value()
+        output.SetFromVector(x[:2 * self._n])
+
+    def _calc_accel(self, context, output: BasicVector):
+        x = context.get_discrete_state(self._x).value()
+        output.SetFromVector(x[2 * self._n:3 * self._n])
+
+
+def make_finger_limiter(config: ControllerConfig) -> RateLimiter:
+    """Opening w [m] in -> both fingers' commanded [q, q, v, v] out, each at w / 2
+    within its travel, at most ``limits.FINGER_SPEED_MAX``."""
+    return _FingerLimiter(config)
+
+
+class _FingerLimiter(Diagram):
+    def __init__(self, config: ControllerConfig):
+        super().__init__()
+        from pydrake.systems.primitives import MatrixGain
+
+        builder = DiagramBuilder()
+        split = builder.AddNamedSystem("split", MatrixGain(np.array([[1.0], [1.0]])))
+        limiter = builder.AddNamedSystem("limiter", RateLimiter(
+            2, config.limiter_period, config.limiter_bandwidth, limits.FINGER_SPEED_MAX,
+            FINGER_ACCEL_MAX, 100.0 * FINGER_ACCEL_MAX, config.diff_ik_period, reference_scale=0.5,
+            lower=0.0, upper=limits.FINGER_MAX))
+        builder.Connect(split.get_output_port(), limiter.get_input_port())
+        builder.ExportInput(split.get_input_port(), "opening")
+        builder.ExportOutput(limiter.GetOutputPort("state"), "finger_state_desired")
+        builder.BuildInto(self)
+        self.limiter = limiter
+
+    def set_opening(self, context, opening: float) -> None:
+        half = float(np.clip(opening / 2, 0.0, limits.FINGER_MAX))
+        self.limiter.set_position(self.limiter.GetMyMutableContextFromRoot(context), [half, half])
+
+
+class EndEffectorController(Diagram):
+    """Input ``X_WE_desired`` (RigidTransform), outputs ``panda_state_desired`` (14)
+    and ``joint_acceleration_commanded`` (7, rad/s^2).
+
+    Joint limits are Franka's, shrunk by a 0.05 rad margin; IK's velocity
+    limits are Franka's scaled by ``config.velocity_scale``; the hand's
+    translational speed is limited to ``config.ee_speed_max`` m/s; the
+    commanded joint motion passes the :class:`RateLimiter` at Franka's
+    velocity, acceleration and jerk limits.
     """
 
     def __init__(self, config: ControllerConfig, q_home):
@@ -70,7 +181,7 @@ class EndEffectorController(Diagram):
         margin = 0.05
         params.set_joint_position_limits((plant.GetPositionLowerLimits() + margin,
                                           plant.GetPositionUpperLimits() - margin))
-        qd = PANDA_QD_MAX * config.velocity_scale
+        qd = limits.QD_MAX * config.velocity_scale
         params.set_joint_velocity_limits((-qd, qd))
         v = config.ee_speed_max
         params.set_end_effector_translational_velocity_limits([-v] * 3, [v] * 3)
@@ -80,17 +191,18 @@ class EndEffectorController(Diagram):
 
         self._diff_ik = builder.AddNamedSystem("diff_ik", DifferentialInverseKinematicsIntegrator(
             plant, plant.world_frame(), plant.GetFrameByName("ee"), config.diff_ik_period, params, context, True))
-        interp = builder.AddNamedSystem("desired_state", StateInterpolatorWithDiscreteDerivative(
-            7, config.diff_ik_period, suppress_initial_transient=True))
-        builder.Connect(self._diff_ik.GetOutputPort("joint_positions"), interp.get_input_port())
+        self._limiter = builder.AddNamedSystem("rate_limiter", RateLimiter(
+            7, config.limiter_period, config.limiter_bandwidth, limits.QD_MAX, limits.QDD_MAX,
+            limits.QDDD_MAX, config.diff_ik_period))
+        builder.Connect(self._diff_ik.GetOutputPort("joint_positions"), self._limiter.get_input_port())
         builder.ExportInput(self._diff_ik.GetInputPort("X_AE_desired"), "X_WE_desired")
-        builder.ExportOutput(interp.get_output_port(), "panda_state_desired")
+        builder.ExportOutput(self._limiter.GetOutputPort("state"), "panda_state_desired")
+        builder.ExportOutput(self._limiter.GetOutputPort("acceleration"), "joint_acceleration_commanded")
         builder.BuildInto(self)
-        self._interp = interp
         self._q_home = q_home
 
     def set_joint_positions(self, context, q) -> None:
-        """Resets the integrator (and the derivative filter) to joint positions q."""
+        """Resets the integrator and the rate limiter (at rest) to joint positions q."""
         q = np.asarray(q, dtype=float)
         self._diff_ik.SetPositions(self._diff_ik.GetMyMutableContextFromRoot(context), q)
-        self._interp.set_initial_position(self._interp.GetMyMutableContextFromRoot(context), q)
+        self._limiter.set_position(self._limiter.GetMyMutableContextFromRoot(context), q)

@@ -41,6 +41,7 @@ FINGER_HALF_THICKNESS = 0.011
 TCP_TO_TIP = 0.009                      # fingertips are 9 mm past the TCP
 # Where the fingertip stops under the lid's lip (x in O; the lip spans -0.125..-0.100).
 UNDER_LIP_X = -0.109
+UNDER_LIP_Z = 0.116
 # Close: the hand's lean toward the robot per radian the lid is below 1.4 rad (up to 0.8).
 CLOSE_LEAN = 0.8
 
@@ -62,15 +63,17 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
         # Finger's upper front edge sits 1 cm inside the lid's underside as it sweeps.
         z_E, x_E = R.col(2), R.col(0)
         tip_offset = (TCP_TO_TIP * z_E + FINGER_HALF_THICKNESS * x_E)[[0, 2]]  # TCP -> tip's upper edge
-        radius, push = 0.209, 0.010
-        under_lip = _xyz(np.array([UNDER_LIP_X, 0.123]) - tip_offset)
+        radius, push = LID_HINGE_XZ[0] - UNDER_LIP_X, 0.004
+        under_lip = _xyz(np.array([UNDER_LIP_X, UNDER_LIP_Z]) - tip_offset)
         # Turn the hand at height first: descending while turning folds the
         # elbow into joint 4's limit.
-        frames += [(1.5, under_lip + [0.0, 0.0, 0.16], R, 0.0),
-                   (2.5, under_lip + [-0.05, 0.0, 0.05], R, 0.0),
+        # Down in front of the box, then in under the lip (a diagonal approach
+        # would cross the lip).
+        frames += [(1.5, under_lip + [-0.05, 0.0, 0.16], R, 0.0),
+                   (2.5, under_lip + [-0.05, 0.0, 0.0], R, 0.0),
                    (3.5, under_lip, R, 0.0),
                    (4.0, under_lip, R, 0.0)]    # a pause, as a person makes before lifting
-        for i, theta in enumerate(np.linspace(0.0, 1.75, 9)[1:]):
+        for i, theta in enumerate(np.linspace(0.0, 1.85, 9)[1:]):
             contact = _arc(theta, radius) + push * np.array([np.sin(theta), np.cos(theta)])
             frames.append((4.0 + 0.5 * (i + 1), _xyz(contact - tip_offset), R, 0.0))
         last = frames[-1][1]
@@ -78,7 +81,7 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
         frames += [(8.5, last + [0.0, 0.0, 0.06], R, 0.0),
                    (9.5, last + [-0.15, 0.0, 0.08], R, 0.0)]
     elif skill == "close":
-        radius, push = 0.19, 0.010
+        radius, push = 0.19, 0.004
         theta0 = 1.75
 
         def hand(theta):

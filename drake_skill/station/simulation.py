@@ -1,4 +1,4 @@
-"""Build once, reset and re-simulate: the station driven by a keyframed plan.
+"""Build once, reset and re-simulate; the one loop that records the station.
 
 ``StationSimulation`` wires a :class:`~drake_skill.station.Station` to a
 :class:`~drake_skill.station.pose_source.PoseTrajectorySource` in one diagram, with one
@@ -8,6 +8,19 @@ Simulator and one Context that every run reuses:
     X_WO = sim.reset(seed=3)            # defaults + object pose drawn from the seed
     log = sim.run(plan, duration=8.0)   # records the hand pose and object state
 
+:class:`StationRecorder` is the only code that advances and samples a
+station: ``StationSimulation.run``, the scripted demonstrator, the Meshcat
+teleoperation and the rollout runner (through :func:`record_station`) all use
+it, so they share one sampling grid, one divergence test, one collision
+reflex and, with perception, the object points of the ``ObjectSegmenter``
+system wired in the diagram (the same points and the same invalid-frame rule
+as skill executions: an invalid frame holds the last valid one).
+
+A run ends early with an exception (all ``RuntimeError``): :class:`ReflexError`
+(the collision reflex: robot-scene contact force or external joint torque
+over ``config.reflex``), :class:`SolverError` (the contact solver did not
+converge) or :class:`DivergedError` (non-finite or runaway joint states).
+
 The same seed gives bit-identical trajectories (the plant is discrete, the
 controllers are discrete, and the randomisation reads only the seed).
 """
@@ -15,21 +28,57 @@ controllers are discrete, and the randomisation reads only the seed).
 from __future__ import annotations
 
 import dataclasses as dc
+import math
 
 import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.framework import DiagramBuilder, EventStatus
 
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
 from drake_skill.station.builder import Station, build_station
 from drake_skill.station.config import StationConfig
-from drake_skill.station.success import judge_success
+from drake_skill.station.success import judge_run, judge_success
 
 
 def pose_to_vector(X: RigidTransform) -> np.ndarray:
     """[x, y, z, qw, qx, qy, qz] of a RigidTransform."""
     return np.r_[X.translation(), X.rotation().ToQuaternion().wxyz()]
+
+
+class DivergedError(RuntimeError):
+    """The simulation produced non-finite or runaway states."""
+
+    reason = "diverged"
+
+    def __init__(self, message: str, time_s: float = math.nan):
+        super().__init__(message)
+        self.time_s = float(time_s)
+
+
+class ReflexError(RuntimeError):
+    """The collision reflex stopped the robot: ``time_s`` [s], ``force_N`` (robot-scene
+    contact force at that instant), ``torque_Nm`` (7 external joint torques) and
+    ``cause`` ("force" or "torque joint i")."""
+
+    reason = "reflex"
+
+    def __init__(self, time_s: float, force_N: float, torque_Nm, cause: str):
+        self.time_s, self.force_N = float(time_s), float(force_N)
+        self.torque_Nm = np.asarray(torque_Nm, dtype=float).copy()
+        self.cause = cause
+        super().__init__(f"collision reflex at t = {self.time_s:.3f} s ({cause}): contact force "
+                         f"{self.force_N:.1f} N, external joint torques {np.round(self.torque_Nm, 1).tolist()} N m")
+
+
+class SolverError(RuntimeError):
+    """The plant's contact solver (SAP) failed to converge at ``time_s``."""
+
+    reason = "solver"
+
+    def __init__(self, message: str, time_s: float):
+        super().__init__(message)
+        self.time_s = float(time_s)
 
 
 @dc.dataclass
@@ -38,53 +87,223 @@ class RunLog:
 
     times: (T,) [s]; ee_pose: (T, 7) X_WE as xyz + wxyz; q: (T, 7) joint
     positions [rad]; object_state: (T,) lid angle [rad] or drawer travel [m];
-    X_WO: the object pose the run started from (ground truth).
+    contact_force: (T,) peak robot-scene contact force [N] over the interval
+    ending at each sample; X_WO: the object pose the run started from (ground truth).
     """
 
     times: np.ndarray
     ee_pose: np.ndarray
     q: np.ndarray
     object_state: np.ndarray
+    contact_force: np.ndarray
     X_WO: RigidTransform
 
     @property
     def final_object_state(self) -> float:
         return float(self.object_state[-1])
 
+    @property
+    def peak_force(self) -> float:
+        return float(np.max(self.contact_force)) if self.contact_force.size else 0.0
 
-class DivergedError(RuntimeError):
-    """The simulation produced non-finite or runaway states."""
 
+class StationRecorder:
+    """Advances a simulator and samples its station: hand pose, joints, object
+    state and peak (filtered) contact force at ``record_hz``; with ``frame_hz``, camera
+    frames on the same grid (every k-th sample, k = record_hz / frame_hz), the
+    object points, validity and X_WO read from ``segmenter`` (an
+    ``ObjectSegmenter`` wired to the station's cloud in the same diagram).
 
-def record_station(simulator, station, root_context, t0: float, n: int, record_hz: float):
-    """Advances ``simulator`` from t0 over n periods of 1 / record_hz, sampling the
-    station at each of the n + 1 instants. Returns (times (T,), ee_pose (T, 7),
-    q (T, 7), object_state (T,)); raises DivergedError on non-finite joint
-    states or joint speeds above 50 rad/s.
+    The grid is anchored at a frame time (or, without frames, at the current
+    time). Drake handles a discrete update due at time t at the start of the
+    step *after* t, so at a frame instant the recorder advances to the event's
+    exact time and processes the pending events, which refreshes the
+    segmenter's memory with the scene at that instant.
+
+    Every simulator step is watched (a simulator monitor): the robot-scene
+    contact force and the external joint torques against ``config.reflex``.
     """
-    context = station.GetMyContextFromRoot(root_context)
-    ee, state_port, obj = (station.GetOutputPort(name) for name in ("ee_pose", "panda_state", "object_state"))
-    times, poses, qs, objs = [], [], [], []
-    for k in range(n + 1):
-        t = t0 + k / record_hz
-        if k > 0:
-            simulator.AdvanceTo(t)
-        state = state_port.Eval(context)
+
+    def __init__(self, station: Station, root_context, simulator, record_hz: float = 100.0,
+                 frame_hz: float | None = None, segmenter=None):
+        self.station = station
+        self.simulator = simulator
+        self.root_context = root_context
+        self.context = station.GetMyContextFromRoot(root_context)
+        self.record_hz = float(record_hz)
+        self.frame_hz = None if frame_hz is None else float(frame_hz)
+        if segmenter is not None and frame_hz is None:
+            raise ValueError("a segmenter needs frame_hz (the camera rate)")
+        self.k = 1 if frame_hz is None else int(round(record_hz / frame_hz))
+        if frame_hz is not None and abs(record_hz / frame_hz - self.k) > 1e-9:
+            raise ValueError(f"record_hz = {record_hz} must be an integer multiple of frame_hz = {frame_hz}")
+        self.segmenter = segmenter
+        if segmenter is not None:
+            fps = station.config.camera.fps
+            if abs(fps - frame_hz) > 1e-9:
+                raise ValueError(f"camera.fps = {fps} Hz: recording perception needs the camera "
+                                 f"at frame_hz = {frame_hz} Hz")
+            self._seg_context = segmenter.GetMyContextFromRoot(root_context)
+        # The same float the camera's periodic events use, so k * period is
+        # exactly their event time.
+        self._frame_period = None if frame_hz is None else 1.0 / self.frame_hz
+        self._ports = {name: station.GetOutputPort(name)
+                       for name in ("ee_pose", "panda_state", "object_state")}
+        self.reset()
+
+    def reset(self) -> None:
+        self.times, self.X_WE, self.q, self.obj, self.grip, self.force = [], [], [], [], [], []
+        self.points, self.valid = [], []
+        self.X_WO_perceived, self.X_WO_frame = None, None
+        self._t0 = None
+        self._last_peak = 0.0
+        self._filtered = np.zeros(9)
+        self._filtered[8] = self.root_context.get_time()
+        self._n = 0
+
+    # ------------------------------------------------------------------ grid
+    def anchor(self) -> float:
+        """Starts the grid at the first frame time at or after now (without
+        frames: now); returns it."""
+        t = self.root_context.get_time()
+        if self._frame_period is None:
+            self._frame0, self._t0 = None, t
+        else:
+            self._frame0 = int(math.ceil(t / self._frame_period - 1e-9))
+            self._t0 = self._frame0 * self._frame_period
+        return self._t0
+
+    def next_time(self) -> float:
+        """Time [s] of the next sample on the grid (nominal)."""
+        if self._t0 is None:
+            raise ValueError("StationRecorder: call anchor() first")
+        if self._frame0 is not None:
+            return self._frame0 * self._frame_period + self._n / self.record_hz
+        return self._t0 + self._n / self.record_hz
+
+    @property
+    def n_samples(self) -> int:
+        return self._n
+
+    @property
+    def at_frame(self) -> bool:
+        """True when the last recorded sample was a frame (a clean end of the grid)."""
+        return self._n > 0 and (self._n - 1) % self.k == 0
+
+    # ---------------------------------------------------------------- stepping
+    def _advance(self, t: float, pending: bool) -> None:
+        station, reflex = self.station, self.station.config.reflex
+        tau_max = np.asarray(reflex.external_torque_max, dtype=float)
+        tripped = []
+        peak = [0.0]
+        filt = self._filtered          # [force, tau (7), time of the last update]
+
+        def monitor(root_context):
+            force, tau = station.robot_scene_contact(root_context)
+            now = root_context.get_time()
+            # The robot's reflex acts on its filtered estimate of the external
+            # wrench and torques: first-order low-pass, time constant filter_time.
+            dt = max(now - filt[8], 0.0)
+            alpha = 1.0 if reflex.filter_time <= 0 else 1.0 - math.exp(-dt / reflex.filter_time)
+            filt[0] += alpha * (force - filt[0])
+            filt[1:8] += alpha * (tau - filt[1:8])
+            filt[8] = now
+            peak[0] = max(peak[0], filt[0])
+            if reflex.enabled:
+                over = np.flatnonzero(np.abs(filt[1:8]) > tau_max)
+                if filt[0] > reflex.contact_force_max or over.size:
+                    cause = "force" if filt[0] > reflex.contact_force_max else f"torque joint {over[0] + 1}"
+                    tripped.append(ReflexError(now, filt[0], filt[1:8], cause))
+                    return EventStatus.ReachedTermination(station, "collision reflex")
+            return EventStatus.Succeeded()
+
+        self.simulator.set_monitor(monitor)
+        try:
+            if t > self.root_context.get_time():
+                self.simulator.AdvanceTo(t)
+            if pending and not tripped:
+                self.simulator.AdvancePendingEvents()
+        except RuntimeError as e:
+            if "failed to converge" in str(e):
+                time_s = self.root_context.get_time()
+                raise SolverError(f"the contact solver failed to converge at t = {time_s:.3f} s: {e}",
+                                  time_s) from e
+            raise
+        finally:
+            self.simulator.clear_monitor()
+        if tripped:
+            raise tripped[0]
+        self._last_peak = peak[0]     # over this interval (0 when no step was taken)
+
+    def sample(self, gripper_command: float = math.nan) -> None:
+        """Advances to the next grid time and records it (frames included)."""
+        if self._t0 is None:
+            raise ValueError("StationRecorder.sample called before anchor()")
+        i = self._n
+        t = self.next_time()
+        at_frame = self._frame_period is not None and i % self.k == 0
+        if at_frame:
+            t = max(t, (self._frame0 + i // self.k) * self._frame_period)
+        self._advance(max(t, self.root_context.get_time()), pending=at_frame)
+        if at_frame and self.segmenter is not None:
+            self._perceive(i // self.k)
+        state = self._ports["panda_state"].Eval(self.context)
         if not np.all(np.isfinite(state)) or np.max(np.abs(state[7:])) > 50.0:
             raise DivergedError(
                 f"simulation diverged at t = {t:.3f} s (joint state {np.round(state, 3)}); "
-                "check the commanded poses and the plant time_step")
-        times.append(t)
-        poses.append(pose_to_vector(ee.Eval(context)))
-        qs.append(state[:7].copy())
-        objs.append(float(obj.Eval(context)[0]))
-    return np.array(times), np.array(poses), np.array(qs), np.array(objs)
+                "check the commanded poses and the plant time_step", t)
+        force_now = float(self._filtered[0])
+        self.times.append(t)
+        self.X_WE.append(pose_to_vector(self._ports["ee_pose"].Eval(self.context)))
+        self.q.append(state[:7].copy())
+        self.obj.append(float(self._ports["object_state"].Eval(self.context)[0]))
+        self.grip.append(float(gripper_command))
+        self.force.append(max(float(self._last_peak), force_now))
+        self._n += 1
+
+    def _perceive(self, frame_index: int) -> None:
+        seg, ctx = self.segmenter, self._seg_context
+        valid = bool(seg.get_valid_output_port().Eval(ctx)[0] > 0.5)
+        points = np.asarray(seg.get_object_points_output_port().Eval(ctx), dtype=np.float32)
+        if valid and self.X_WO_perceived is None:
+            self.X_WO_perceived = pose_to_vector(seg.get_X_WO_output_port().Eval(ctx))
+            self.X_WO_frame = frame_index
+        self.points.append(points)
+        self.valid.append(valid)
+
+    def record(self, n: int) -> None:
+        """Samples n + 1 instants from the anchor (n periods)."""
+        for _ in range(n + 1):
+            self.sample()
+
+    def run_log(self, X_WO: RigidTransform) -> RunLog:
+        return RunLog(np.array(self.times), np.array(self.X_WE).reshape(-1, 7), np.array(self.q).reshape(-1, 7),
+                      np.array(self.obj), np.array(self.force), X_WO)
+
+
+def record_station(simulator, station, root_context, t0: float, n: int, record_hz: float):
+    """Advances ``simulator`` from t0 (the current time) over n periods of
+    1 / record_hz, sampling the station at each of the n + 1 instants (a
+    :class:`StationRecorder` without frames). Returns (times (T,), ee_pose
+    (T, 7), q (T, 7), object_state (T,)); raises :class:`DivergedError`,
+    :class:`ReflexError` or :class:`SolverError` (see the module docstring).
+    """
+    if abs(root_context.get_time() - t0) > 1e-9:
+        raise ValueError(f"record_station: t0 = {t0} s but the context is at {root_context.get_time()} s")
+    recorder = StationRecorder(station, root_context, simulator, record_hz)
+    recorder.anchor()
+    recorder.record(n)
+    return np.array(recorder.times), np.array(recorder.X_WE), np.array(recorder.q), np.array(recorder.obj)
 
 
 class StationSimulation:
-    """One station diagram, one simulator, reused for every run."""
+    """One station diagram, one simulator, reused for every run.
 
-    def __init__(self, config: StationConfig | None = None, meshcat=None):
+    perceive: wire an ``ObjectSegmenter`` to the camera (``self.segmenter``),
+    for recordings with perception (needs ``config.enable_camera``).
+    """
+
+    def __init__(self, config: StationConfig | None = None, meshcat=None, perceive: bool = False):
         builder = DiagramBuilder()
         self.station: Station = builder.AddNamedSystem("station", build_station(config, meshcat))
         self.config = self.station.config
@@ -93,6 +312,12 @@ class StationSimulation:
                         self.station.GetInputPort("ee_pose_desired"))
         builder.Connect(self.source.GetOutputPort("gripper_command"),
                         self.station.GetInputPort("gripper_command"))
+        self.segmenter = None
+        if perceive:
+            if not self.config.enable_camera:
+                raise ValueError("perceive=True needs a station with enable_camera = true")
+            from drake_skill.perception.systems import add_object_segmenter
+            self.segmenter = add_object_segmenter(builder, self.station)
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         self.simulator = Simulator(self.diagram, self.context)
@@ -129,25 +354,40 @@ class StationSimulation:
         self.source.set_plan(self.source.GetMyMutableContextFromRoot(self.context), plan)
         self.simulator.Initialize()
 
+    def plan(self) -> PosePlan:
+        return self.source.plan(self.source.GetMyContextFromRoot(self.context))
+
     def object_state(self) -> float:
         return float(self.station.GetOutputPort("object_state").Eval(self.station_context())[0])
 
     def ee_pose(self) -> RigidTransform:
         return self.station.GetOutputPort("ee_pose").Eval(self.station_context())
 
+    def recorder(self, record_hz: float = 100.0, frame_hz: float | None = None) -> StationRecorder:
+        """A recorder of this simulation (with the segmenter when built with perceive=True
+        and ``frame_hz`` is given)."""
+        segmenter = self.segmenter if frame_hz is not None else None
+        return StationRecorder(self.station, self.context, self.simulator, record_hz, frame_hz, segmenter)
+
     def run(self, plan: PosePlan | None, duration: float, record_hz: float = 100.0) -> RunLog:
         """Plays ``plan`` (None: keep the current one) for ``duration`` s from the
-        current time, recording at ``record_hz``; raises DivergedError on NaN."""
+        current time, recording at ``record_hz``; raises DivergedError,
+        ReflexError or SolverError (see the module docstring)."""
         if plan is not None:
             self.set_plan(plan)
         if duration <= 0:
             raise ValueError(f"duration must be positive, got {duration}")
-        times, poses, qs, objs = record_station(self.simulator, self.station, self.context,
-                                                self.context.get_time(), int(round(duration * record_hz)),
-                                                record_hz)
-        return RunLog(times, poses, qs, objs, self._X_WO)
+        recorder = self.recorder(record_hz)
+        recorder.anchor()
+        recorder.record(int(round(duration * record_hz)))
+        return recorder.run_log(self._X_WO)
 
     def judge(self, skill: str, object_state: float | None = None) -> bool:
-        """Ground-truth success of ``skill`` for the current (or given) object state."""
+        """Ground-truth verdict on the final object state alone (see also :meth:`judge_log`)."""
         value = self.object_state() if object_state is None else object_state
         return judge_success(skill, value, self.config.success)
+
+    def judge_log(self, skill: str, log: RunLog) -> bool:
+        """Ground-truth verdict of a run: the final object state, judged only if the
+        hand touched nothing in the run's last ``success.settle_time`` s."""
+        return judge_run(skill, log.times, log.object_state, log.contact_force, self.config.success)

@@ -1,0 +1,219 @@
+"""The object camera: the Kinect's view cropped to where the object can appear.
+
+The perception chain (docs/architecture.md: camera -> ObjectSegmenter ->
+PcaeFeaturizer -> PomrpReward) only needs the pixels that can show the
+object. :func:`add_object_camera` adds, next to the full-frame camera, a second
+``RgbdSensor`` at the same pose whose intrinsics are the *crop* of the full
+camera's: the same focal lengths and pixel grid, the principal point shifted
+by the crop's corner,
+
+    fx' = fx,  fy' = fy,  cx' = cx - x0,  cy' = cy - y0,   width' = w, height' = h,
+
+so pixel (u', v') of the object camera is pixel (x0 + u', y0 + v') of the full
+frame (a pinhole ``u = fx X / Z + cx``: shifting the principal point only
+shifts the pixel indices). Its images and its organised point cloud are
+therefore the matching crop of the full-frame ones, at a fraction of the
+rendering and cloud cost. The full-frame camera stays for pictures, Meshcat
+and the demonstration images.
+
+The window (:class:`CropWindow`) is sized once, at build time, from the
+object's swept volume: :func:`object_swept_points` places the corners of the
+oriented bounding box of every perception geometry of the object's bodies
+(``pydrake.geometry.CalcObb``) at every combination of
+
+- the articulated joint over its whole range (lid angle / drawer travel,
+  ``n_joint`` samples between the joint's limits),
+- the base pose over the randomisation of ``ObjectConfig``: x and y at the
+  ends and the centre of ``+-randomize_xy``, yaw at ``n_yaw`` values in
+  ``+-randomize_yaw`` around the nominal pose;
+
+:func:`crop_window` projects them and takes their bounding rectangle plus
+``margin_px`` pixels (covering the sampling of the yaw and joint and the
+rasteriser's edge pixels), clipped to the image. (The projection of a corner
+is a linear-fractional function of the base translation, extreme at the
+ends of the translation ranges; yaw and joint are sampled finely enough
+that the margin covers what lies between samples.)
+
+Ports the station exports from this camera (rendered on demand, like the
+full-frame ones): ``object_point_cloud`` (PointCloud, world frame, xyz + rgb,
+organised ``height' x width'``), ``object_color_image``,
+``object_depth_image`` (32F, m) and ``object_label_image`` (ground truth for
+tests; never rendered unless evaluated).
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import math
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.geometry import CalcObb, ColorRenderCamera, DepthRenderCamera, RenderCameraCore, Role
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.perception import BaseField, DepthImageToPointCloud
+from pydrake.systems.primitives import ConstantValueSource
+from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
+
+__all__ = ["CropWindow", "ObjectCamera", "add_object_camera", "crop_camera_info", "crop_window",
+           "object_swept_points"]
+
+MARGIN_PX = 6
+"""Pixels added on every side of the swept volume's projection."""
+
+
+@dc.dataclass(frozen=True)
+class CropWindow:
+    """A rectangle of the full frame: columns ``x0 .. x0 + width - 1``, rows ``y0 .. y0 + height - 1``."""
+
+    x0: int
+    y0: int
+    width: int
+    height: int
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(height, width), the organised cloud's image shape."""
+        return (self.height, self.width)
+
+    def slices(self) -> tuple[slice, slice]:
+        """(rows, columns) of the full frame: ``full_image[window.slices()]`` is the crop."""
+        return slice(self.y0, self.y0 + self.height), slice(self.x0, self.x0 + self.width)
+
+    def crop(self, image: np.ndarray) -> np.ndarray:
+        """The crop of a full-frame array (H, W, ...) (a view)."""
+        return np.asarray(image)[self.slices()]
+
+
+@dc.dataclass(frozen=True)
+class ObjectCamera:
+    """What :func:`add_object_camera` built: the window, its intrinsics, the sensor and the port names."""
+
+    window: CropWindow
+    info: CameraInfo
+    sensor: RgbdSensor
+    image_port_names: tuple[str, str] = ("object_color_image", "object_depth_image")
+    cloud_port_name: str = "object_point_cloud"
+    label_port_name: str = "object_label_image"
+
+
+def crop_camera_info(info: CameraInfo, window: CropWindow) -> CameraInfo:
+    """Intrinsics of the crop ``window`` of a camera ``info``: same focal lengths, principal
+    point shifted by the window's corner (see the module docstring)."""
+    if not (0 <= window.x0 and 0 <= window.y0 and window.width >= 1 and window.height >= 1
+            and window.x0 + window.width <= info.width() and window.y0 + window.height <= info.height()):
+        raise ValueError(f"crop window {window} does not lie inside the {info.width()} x {info.height()} image")
+    return CameraInfo(window.width, window.height, info.focal_x(), info.focal_y(),
+                      info.center_x() - window.x0, info.center_y() - window.y0)
+
+
+def _obb_corners(shape, X_BG: RigidTransform) -> np.ndarray:
+    """The 8 corners (8, 3) of a shape's oriented bounding box, in its body's frame B."""
+    obb = CalcObb(shape)
+    if obb is None:     # half-spaces have none: they cannot be bounded
+        raise ValueError(f"object geometry of shape {type(shape).__name__} has no bounding box; "
+                         "the object camera needs bounded geometry")
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], float)
+    local = signs * obb.half_width()
+    X_BO = X_BG @ obb.pose()
+    return (X_BO.rotation().matrix() @ local.T).T + X_BO.translation()
+
+
+def object_swept_points(station, n_joint: int = 45, n_yaw: int = 5) -> np.ndarray:
+    """World points (M, 3) [m] bounding every place the object's perception geometry can take
+    (see the module docstring). ``station`` is a :class:`~drake_skill.station.builder.Station`
+    under construction (its plant finalised)."""
+    plant, inspector = station.plant, station.scene_graph.model_inspector()
+    obj, joint, o = station.object_instance, station.object_joint, station.config.object
+    corners = {}
+    for body_index in plant.GetBodyIndices(obj):
+        body = plant.get_body(body_index)
+        frame_id = plant.GetBodyFrameIdIfExists(body_index)
+        if frame_id is None:
+            continue
+        pts = [_obb_corners(inspector.GetShape(g), inspector.GetPoseInFrame(g))
+               for g in inspector.GetGeometries(frame_id, Role.kPerception)]
+        if pts:
+            corners[body_index] = (body, np.concatenate(pts))
+    if not corners:
+        raise ValueError("the object has no perception geometry: nothing for the object camera to see")
+    lo, hi = float(joint.position_lower_limits()[0]), float(joint.position_upper_limits()[0])
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        raise ValueError(f"object joint '{joint.name()}' has an unbounded range [{lo}, {hi}]; "
+                         "the object camera needs joint limits")
+    context = plant.CreateDefaultContext()
+    out = []
+    for dx in (-o.randomize_xy, 0.0, o.randomize_xy):
+        for dy in (-o.randomize_xy, 0.0, o.randomize_xy):
+            for dyaw in np.linspace(-o.randomize_yaw, o.randomize_yaw, n_yaw):
+                X_WO = RigidTransform(RollPitchYaw(0.0, 0.0, o.yaw + dyaw), [o.x + dx, o.y + dy, 0.0])
+                plant.SetFreeBodyPose(context, station.object_base, X_WO)
+                for q in np.linspace(lo, hi, n_joint):
+                    positions = plant.GetPositions(context).copy()
+                    positions[joint.position_start()] = q
+                    plant.SetPositions(context, positions)
+                    for body, pts in corners.values():
+                        X_WB = plant.EvalBodyPoseInWorld(context, body)
+                        out.append((X_WB.rotation().matrix() @ pts.T).T + X_WB.translation())
+    return np.concatenate(out)
+
+
+def crop_window(points_W: np.ndarray, X_WC: RigidTransform, info: CameraInfo,
+                margin_px: int = MARGIN_PX) -> CropWindow:
+    """The smallest window of the image ``info`` holding the projections of ``points_W``
+    (M, 3) [m, world] seen from ``X_WC`` (Drake camera frame: z forward, x right, y down),
+    grown by ``margin_px`` and clipped to the image."""
+    p_C = X_WC.inverse().multiply(np.asarray(points_W, float).T)       # (3, M)
+    if np.any(p_C[2] <= 1e-6):
+        raise ValueError("part of the object's swept volume lies behind the camera; "
+                         "aim the camera at the object (camera.position / camera.target)")
+    u = info.focal_x() * p_C[0] / p_C[2] + info.center_x()
+    v = info.focal_y() * p_C[1] / p_C[2] + info.center_y()
+    x0 = max(0, int(math.floor(u.min())) - margin_px)
+    y0 = max(0, int(math.floor(v.min())) - margin_px)
+    x1 = min(info.width(), int(math.ceil(u.max())) + 1 + margin_px)
+    y1 = min(info.height(), int(math.ceil(v.max())) + 1 + margin_px)
+    if x1 <= x0 or y1 <= y0:
+        raise ValueError("the object's swept volume projects outside the camera image; "
+                         "aim the camera at the object (camera.position / camera.target)")
+    return CropWindow(x0, y0, x1 - x0, y1 - y0)
+
+
+def add_object_camera(builder, station, color_camera: ColorRenderCamera, depth_camera: DepthRenderCamera,
+                      parent_id, X_PC: RigidTransform, margin_px: int = MARGIN_PX) -> ObjectCamera:
+    """Adds the object camera next to the full-frame camera described by ``color_camera`` /
+    ``depth_camera`` (same renderer, clipping and depth range) mounted at ``X_PC`` on the
+    frame ``parent_id``; exports its ports (module docstring) from ``builder``.
+
+    ``station`` is the Station being built (its plant finalised): the window comes
+    from its object and ``station.config.object``; the camera must be fixed in the
+    world (``parent_id`` the world frame), as the window is computed once.
+    """
+    full = color_camera.core().intrinsics()
+    world_id = station.plant.GetBodyFrameIdOrThrow(station.plant.world_body().index())
+    if parent_id != world_id:
+        raise ValueError("the object camera is sized once at build time: mount the camera on the world frame")
+    X_WC = X_PC @ color_camera.core().sensor_pose_in_camera_body()
+    window = crop_window(object_swept_points(station), X_WC, full, margin_px)
+    info = crop_camera_info(full, window)
+    core = color_camera.core()
+    crop_core = RenderCameraCore(core.renderer_name(), info, core.clipping(), core.sensor_pose_in_camera_body())
+    color = ColorRenderCamera(crop_core, show_window=False)
+    depth = DepthRenderCamera(RenderCameraCore(depth_camera.core().renderer_name(), info,
+                                               depth_camera.core().clipping(),
+                                               depth_camera.core().sensor_pose_in_camera_body()),
+                              depth_camera.depth_range())
+    sensor = builder.AddNamedSystem("object_camera", RgbdSensor(parent_id, X_PC, color, depth))
+    builder.Connect(station.scene_graph.get_query_output_port(), sensor.query_object_input_port())
+    to_cloud = builder.AddNamedSystem("object_depth_to_cloud", DepthImageToPointCloud(
+        info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
+    builder.Connect(sensor.depth_image_32F_output_port(), to_cloud.depth_image_input_port())
+    builder.Connect(sensor.color_image_output_port(), to_cloud.color_image_input_port())
+    # A constant camera pose keeps the cloud's cache independent of the robot's state.
+    pose = builder.AddNamedSystem("object_camera_pose", ConstantValueSource(AbstractValue.Make(X_WC)))
+    builder.Connect(pose.get_output_port(), to_cloud.camera_pose_input_port())
+    camera = ObjectCamera(window, info, sensor)
+    builder.ExportOutput(to_cloud.point_cloud_output_port(), camera.cloud_port_name)
+    builder.ExportOutput(sensor.color_image_output_port(), camera.image_port_names[0])
+    builder.ExportOutput(sensor.depth_image_32F_output_port(), camera.image_port_names[1])
+    builder.ExportOutput(sensor.label_image_output_port(), camera.label_port_name)
+    return camera

@@ -1,0 +1,605 @@
+"""The hardware station: the simulated station's ports, backed by a real Panda over LCM.
+
+``build_hardware_station(config)`` returns a :class:`HardwareStation`, a Diagram
+exporting the same ports (names and value types) as ``build_station`` (see
+``drake_skill.station.builder``), so the systems around the station (DMP,
+segmenter, PCAE, reward) and the rollout runner do not know which one they
+hold (docs/architecture.md, "One diagram per skill execution"; the pattern of
+``MakeHardwareStation`` in the ``manipulation`` course)::
+
+    ee_pose_desired --> [workspace clip] --> [EndEffectorController] --q--> [command encoder] --> LCM PANDA_COMMAND
+    gripper_command --> [SchunkWsgCommandSender] --> LCM PANDA_HAND_COMMAND
+    LCM PANDA_STATUS --> [PandaStatusReceiver] --> panda_state, ee_pose (forward kinematics), torque_external
+                     \\-> [status monitor]: stale status, the robot's own reflex, the shared reflex limits
+    LCM camera images --> [LcmImageArrayDecoder] --> color/depth/label_image --> [DepthImageToPointCloud] --> point_cloud
+
+Talking to the drake-franka-driver (``--control_mode=position``):
+
+* Commands are ``lcmt_panda_command`` in position mode, published every
+  ``command_period`` and stamped with **wall-clock** ``utime`` [us since the
+  epoch]: the driver drops commands older than its ``--expire_sec`` (0.1 s)
+  by its own clock. Drake's ``PandaCommandSender`` stamps simulation time,
+  which the driver would reject, so :class:`PandaCommandEncoder` builds the
+  message instead (same fields, position mode).
+* The status is decoded by Drake's ``PandaStatusReceiver``.
+
+Safety lives here, not in the caller's hands:
+
+* The first command is the measured position: ``reset`` waits for a status
+  and starts the controller's integrator at the measured joints.
+* Commanded hand positions are clipped to ``config.workspace``.
+* Joint commands come out of the same :class:`EndEffectorController` as in
+  simulation (differential IK with Franka's joint position and velocity
+  limits and the controller's rate limiter, where the station config has one).
+* No status for more than ``status_timeout`` (100 ms) stops the station with
+  :class:`StaleStatusError`: the check runs every ``STATUS_CHECK_PERIOD``
+  (5 ms), and the command published at the instant it fires is the last.
+* The reflex: the driver reports the robot's own reflex (``robot_mode`` =
+  kReflex); the measured external joint torque is checked against the
+  station config's reflex limits by :func:`reflex_violation`, the function
+  that decides the reflex in simulation too.
+
+The station's simulator must run in real time (``realtime`` is True; the
+rollout runner paces its simulator by it). Time inside the diagram is the
+simulator's; the status age is measured in it.
+
+A plant model (arm only) is kept for the forward kinematics of ``ee_pose``.
+There is no ground truth on the robot: ``object_state`` is NaN (a simulated
+robot publishes its own on ``ground_truth_channel``) and ``contact_results``
+empty; ``object_pose`` is the pose the object was placed
+at for the rollout (the human is asked to place it there).
+"""
+
+from __future__ import annotations
+
+import dataclasses as dc
+import time
+from typing import Callable
+
+import numpy as np
+from drake import (lcmt_image, lcmt_image_array, lcmt_panda_command, lcmt_panda_status, lcmt_schunk_wsg_command,
+                   lcmt_scope)
+from pydrake.common.value import AbstractValue, Value
+from pydrake.lcm import DrakeLcm
+from pydrake.manipulation import PandaStatusReceiver, SchunkWsgCommandSender
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import ContactResults
+from pydrake.perception import BaseField, DepthImageToPointCloud
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
+from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource, Multiplexer
+from pydrake.systems.sensors import PixelType
+
+from drake_skill.station import simulation as _simulation
+from drake_skill.station.builder import Station
+from drake_skill.station.controller import EndEffectorController, make_control_plant
+from drake_skill.station.hardware_config import HardwareConfig, validate_hardware_config
+
+N_JOINTS = 7
+#: Period of the status monitor's checks [s]: a stale status is caught at
+#: most this long after ``status_timeout``.
+STATUS_CHECK_PERIOD = 0.005
+
+
+class StaleStatusError(RuntimeError):
+    """The robot's status stopped arriving: the station stopped commanding.
+
+    ``last_seen`` and ``detected_at``: the station's times [s] of the last new
+    status and of the check that found it stale (None where not known).
+    """
+
+    def __init__(self, message: str, last_seen: float | None = None, detected_at: float | None = None):
+        super().__init__(message)
+        self.last_seen, self.detected_at = last_seen, detected_at
+
+
+#: The reflex error of the simulated station, where it defines one.
+ReflexError = getattr(_simulation, "ReflexError", None) or type(
+    "ReflexError", (RuntimeError,), {"__doc__": "The collision reflex stopped the arm."})
+
+
+def wall_clock_utime() -> int:
+    """Microseconds since the epoch (the driver's ``std::chrono::system_clock``)."""
+    return int(time.time() * 1e6)
+
+
+def clip_to_workspace(p_WE, lower, upper) -> np.ndarray:
+    """p_WE (3,) [m] clipped to the box [lower, upper] (world frame)."""
+    return np.clip(np.asarray(p_WE, dtype=float), lower, upper)
+
+
+def reflex_limits(station_config) -> np.ndarray | None:
+    """(7,) external joint torque limits [N m] of the station config's reflex, or None."""
+    reflex = getattr(station_config, "reflex", None)
+    if reflex is None or not getattr(reflex, "enabled", True):
+        return None
+    limit = getattr(reflex, "external_torque_max", None)
+    return None if limit is None else np.asarray(limit, dtype=float)
+
+
+def reflex_violation(tau_external, limits) -> str | None:
+    """Why the reflex fires for external joint torques ``tau_external`` (7,) [N m]
+    against ``limits`` (7,) [N m], or None: |tau_i| > limit_i on any joint i."""
+    if limits is None:
+        return None
+    tau = np.asarray(tau_external, dtype=float)
+    over = np.flatnonzero(np.abs(tau) > limits)
+    if over.size == 0:
+        return None
+    i = int(over[np.argmax(np.abs(tau[over]) - limits[over])])
+    return f"external torque on joint {i + 1} is {tau[i]:.1f} N m (limit {limits[i]:.1f} N m)"
+
+
+# --------------------------------------------------------------------------- leaf systems
+class WorkspaceClip(LeafSystem):
+    """``X_WE`` in, ``X_WE_clipped`` out: the translation clipped to the workspace box,
+    the rotation unchanged."""
+
+    def __init__(self, lower, upper):
+        super().__init__()
+        self._lower, self._upper = np.asarray(lower, float), np.asarray(upper, float)
+        self._in = self.DeclareAbstractInputPort("X_WE", Value(RigidTransform()))
+        self.DeclareAbstractOutputPort("X_WE_clipped", lambda: Value(RigidTransform()), self._calc_clipped,
+                                       {self._in.ticket()})
+
+    def _calc_clipped(self, context, output):
+        X = self._in.Eval(context)
+        output.set_value(RigidTransform(X.rotation(), clip_to_workspace(X.translation(), self._lower,
+                                                                        self._upper)))
+
+
+class PandaCommandEncoder(LeafSystem):
+    """Joint positions ``q`` (7) in, ``lcmt_panda_command`` (position mode) out,
+    stamped with the wall clock (:func:`wall_clock_utime`): the message of
+    Drake's ``PandaCommandSender`` in position mode, except for ``utime``."""
+
+    def __init__(self, clock: Callable[[], int] = wall_clock_utime):
+        super().__init__()
+        self._clock = clock
+        self._q = self.DeclareVectorInputPort("position", N_JOINTS)
+        self.DeclareAbstractOutputPort("lcmt_panda_command", lambda: AbstractValue.Make(lcmt_panda_command()),
+                                       self._calc_message, {self._q.ticket(), self.time_ticket()})
+
+    def _calc_message(self, context, output):
+        msg = lcmt_panda_command()
+        msg.utime = self._clock()
+        msg.control_mode_expected = lcmt_panda_status.CONTROL_MODE_POSITION
+        msg.num_joint_position = N_JOINTS
+        msg.joint_position = [float(v) for v in self._q.Eval(context)]
+        msg.num_joint_velocity = msg.num_joint_torque = 0
+        msg.joint_velocity, msg.joint_torque = [], []
+        output.set_value(msg)
+
+
+class StatusMonitor(LeafSystem):
+    """Watches the status messages; raises before a command goes out on a bad one.
+
+    Input ``status`` (Python ``lcmt_panda_status``), ``torque_external`` (7) [N m].
+    Discrete state [utime of the last new status, context time it was seen].
+    Every ``period`` s: a status with a new ``utime`` refreshes the state; a
+    status older than ``timeout`` s raises :class:`StaleStatusError`; a
+    status whose ``robot_mode`` is kReflex or kUserStopped, or an external
+    torque over the reflex limits (:func:`reflex_violation`), raises
+    :class:`ReflexError`. The error ends the simulator's step: no command
+    goes out after the instant of the check.
+    """
+
+    def __init__(self, period: float, timeout: float, torque_limits=None, channel: str = "PANDA_STATUS"):
+        super().__init__()
+        self._timeout, self._limits, self._channel = float(timeout), torque_limits, channel
+        self._status = self.DeclareAbstractInputPort("status", AbstractValue.Make(lcmt_panda_status()))
+        self._tau = self.DeclareVectorInputPort("torque_external", N_JOINTS)
+        self._state = self.DeclareDiscreteState(2)   # [last utime, time seen]
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._check)
+
+    def mark_fresh(self, context) -> None:
+        """Records the status now in ``context`` as seen at the context's time."""
+        msg = self._status.Eval(context)
+        context.get_mutable_discrete_state(self._state).SetFromVector([float(msg.utime), context.get_time()])
+
+    def last_seen(self, context) -> float:
+        """Context time [s] the last new status was seen at."""
+        return float(context.get_discrete_state(self._state).get_value()[1])
+
+    def _check(self, context, discrete_state):
+        msg = self._status.Eval(context)
+        last_utime, seen = context.get_discrete_state(self._state).get_value()
+        t = context.get_time()
+        if msg.num_joints and float(msg.utime) != last_utime:
+            last_utime, seen = float(msg.utime), t
+            discrete_state.get_mutable_vector(self._state).SetFromVector([last_utime, seen])
+        age = t - seen
+        if age > self._timeout:
+            raise StaleStatusError(
+                f"no status from the robot on LCM channel {self._channel!r} for {age * 1e3:.0f} ms "
+                f"(limit {self._timeout * 1e3:.0f} ms, last at t = {seen:.3f} s, now t = {t:.3f} s): "
+                "stopped commanding. Check that the driver runs, its --lcm_url and channels, and the network",
+                last_seen=seen, detected_at=t)
+        if msg.num_joints and msg.robot_mode in (lcmt_panda_status.kReflex, lcmt_panda_status.kUserStopped):
+            what = "reflex" if msg.robot_mode == lcmt_panda_status.kReflex else "user stop"
+            raise ReflexError(f"the robot reports its {what} at t = {t:.3f} s: stopped commanding")
+        why = reflex_violation(self._tau.Eval(context), self._limits)
+        if why is not None:
+            raise ReflexError(f"reflex at t = {t:.3f} s: {why}")
+
+
+class ForwardKinematics(LeafSystem):
+    """``panda_state`` (14) in, ``X_WE`` out: the TCP pose of the kinematic arm model."""
+
+    def __init__(self):
+        super().__init__()
+        self._plant = make_control_plant()
+        self._frame = self._plant.GetFrameByName("ee")
+        # Scratch memory for the kinematics, not run state: every evaluation
+        # writes all positions before reading.
+        self._plant_context = self._plant.CreateDefaultContext()
+        self._state = self.DeclareVectorInputPort("panda_state", 2 * N_JOINTS)
+        self.DeclareAbstractOutputPort("X_WE", lambda: Value(RigidTransform()), self._calc_pose,
+                                       {self._state.ticket()})
+
+    def _calc_pose(self, context, output):
+        self._plant.SetPositions(self._plant_context, self._state.Eval(context)[:N_JOINTS])
+        output.set_value(self._plant.CalcRelativeTransform(self._plant_context, self._plant.world_frame(),
+                                                           self._frame))
+
+
+class GroundTruthDecoder(LeafSystem):
+    """``lcmt_scope`` in, ``object_state`` [1] out: its first value, NaN before any message."""
+
+    def __init__(self):
+        super().__init__()
+        self._msg = self.DeclareAbstractInputPort("message", AbstractValue.Make(lcmt_scope()))
+        self.DeclareVectorOutputPort("object_state", 1, self._calc_state, {self._msg.ticket()})
+
+    def _calc_state(self, context, output):
+        msg = self._msg.Eval(context)
+        output.SetFromVector([float(msg.value[0]) if msg.size > 0 else np.nan])
+
+
+class LcmImageArrayDecoder(LeafSystem):
+    """``lcmt_image_array`` (Python) in; ``color_image`` (RGBA8), ``depth_image``
+    (32F, m) and ``label_image`` (16I) out, each of ``width`` x ``height``.
+
+    Drake's ``LcmImageArrayToImages`` (pydrake 1.51.1) fills only the first
+    quarter of a 32-bit depth image it decodes (the rest is zero: measured on
+    a round trip through ``ImageToLcmImageArrayT``), so the images are
+    decoded here with numpy (uncompressed or zlib). Before any message, or
+    for an image the message lacks: colour and label zero, depth +inf (no
+    return).
+    """
+
+    _FORMATS = {  # pixel_format -> (output, channels, dtype)
+        lcmt_image.PIXEL_FORMAT_RGBA: ("color_image", 4, np.uint8),
+        lcmt_image.PIXEL_FORMAT_DEPTH: ("depth_image", 1, np.float32),
+        lcmt_image.PIXEL_FORMAT_LABEL: ("label_image", 1, np.int16),
+    }
+
+    def __init__(self, width: int, height: int):
+        super().__init__()
+        from pydrake.systems.sensors import ImageDepth32F, ImageLabel16I, ImageRgba8U
+
+        self._w, self._h = int(width), int(height)
+        self._types = {"color_image": ImageRgba8U, "depth_image": ImageDepth32F, "label_image": ImageLabel16I}
+        self._msg = self.DeclareAbstractInputPort("image_array", AbstractValue.Make(lcmt_image_array()))
+        for name, kind in self._types.items():
+            self.DeclareAbstractOutputPort(
+                name, lambda kind=kind: Value(kind(self._w, self._h)),
+                lambda context, output, name=name: self._calc_image(context, output, name),
+                {self._msg.ticket()})
+
+    def _calc_image(self, context, output, name):
+        import zlib
+
+        image = self._types[name](self._w, self._h)
+        data = image.mutable_data
+        data[:] = np.inf if name == "depth_image" else 0
+        for im in self._msg.Eval(context).images:
+            target = self._FORMATS.get(im.pixel_format)
+            if target is None or target[0] != name:
+                continue
+            _, channels, dtype = target
+            if (im.width, im.height) != (self._w, self._h):
+                raise ValueError(f"camera image {name} is {im.width} x {im.height}, the station's camera "
+                                 f"is {self._w} x {self._h}: set the scenario's camera width/height")
+            raw = zlib.decompress(bytes(im.data)) if im.compression_method == lcmt_image.COMPRESSION_METHOD_ZLIB \
+                else bytes(im.data)
+            rows = np.frombuffer(raw, dtype=np.uint8).reshape(im.height, im.row_stride)
+            pixels = rows[:, :self._w * channels * np.dtype(dtype).itemsize].copy().view(dtype)
+            data[:] = pixels.reshape(self._h, self._w, channels)
+        output.set_value(image)
+
+
+class PlacedObjectPose(LeafSystem):
+    """Holds, as an abstract parameter, the pose the object was placed at for this run."""
+
+    def __init__(self):
+        super().__init__()
+        self._index = self.DeclareAbstractParameter(AbstractValue.Make(RigidTransform()))
+
+    def set_pose(self, context, X_WO: RigidTransform) -> None:
+        context.get_mutable_abstract_parameter(self._index).set_value(X_WO)
+
+    def get_pose(self, context) -> RigidTransform:
+        return context.get_abstract_parameter(self._index).get_value()
+
+
+class RealSenseCamera(LeafSystem):  # pragma: no cover - needs a device
+    """Colour (RGBA8) and depth (32F, m) images from a RealSense through ``pyrealsense2``.
+
+    The optional extra ``pip install pyrealsense2``; frames are polled at
+    ``fps`` and held in abstract state. The depth stream is aligned to the
+    colour stream, so the camera's intrinsics are the colour stream's.
+    """
+
+    def __init__(self, width: int, height: int, fps: float):
+        super().__init__()
+        try:
+            import pyrealsense2 as rs
+        except ImportError as e:
+            raise ValueError("camera_source = 'realsense' needs pyrealsense2: pip install pyrealsense2 "
+                             "(or camera_source = 'lcm')") from e
+        from pydrake.systems.sensors import ImageDepth32F, ImageRgba8U
+
+        self._rs = rs
+        self._pipeline = rs.pipeline()
+        cfg = rs.config()
+        rate = int(round(min(fps, 30)))
+        cfg.enable_stream(rs.stream.color, width, height, rs.format.rgba8, 30)
+        cfg.enable_stream(rs.stream.depth, width, height, rs.format.z16, 30)
+        profile = self._pipeline.start(cfg)
+        self._depth_scale = profile.get_device().first_depth_sensor().get_depth_scale()
+        self._align = rs.align(rs.stream.color)
+        self._color = self.DeclareAbstractState(AbstractValue.Make(ImageRgba8U(width, height)))
+        self._depth = self.DeclareAbstractState(AbstractValue.Make(ImageDepth32F(width, height)))
+        self.DeclarePeriodicUnrestrictedUpdateEvent(1.0 / rate, 0.0, self._poll)
+        self.DeclareStateOutputPort("color_image", self._color)
+        self.DeclareStateOutputPort("depth_image", self._depth)
+
+    def _poll(self, context, state):
+        from pydrake.systems.sensors import ImageDepth32F, ImageRgba8U
+
+        frames = self._align.process(self._pipeline.wait_for_frames())
+        color = np.asanyarray(frames.get_color_frame().get_data())
+        depth = np.asanyarray(frames.get_depth_frame().get_data()).astype(np.float32) * self._depth_scale
+        depth[depth == 0] = np.inf   # no return
+        h, w = depth.shape
+        image_c, image_d = ImageRgba8U(w, h), ImageDepth32F(w, h)
+        image_c.mutable_data[:] = color.reshape(h, w, 4)
+        image_d.mutable_data[:] = depth.reshape(h, w, 1)
+        state.get_mutable_abstract_state(int(self._color)).set_value(image_c)
+        state.get_mutable_abstract_state(int(self._depth)).set_value(image_d)
+
+
+# --------------------------------------------------------------------------- camera geometry
+def camera_geometry(station_config):
+    """(CameraInfo, X_WC) of the scenario's camera, as the simulated station renders it."""
+    camera = station_config.camera
+    if hasattr(camera, "MakeCameras"):        # Drake's CameraConfig
+        color, _ = camera.MakeCameras()
+        X_PB = camera.X_PB.GetDeterministicValue()
+        X_BC = color.core().sensor_pose_in_camera_body()
+        return color.core().intrinsics(), X_PB @ X_BC
+    from drake_skill.common import look_at
+    from drake_skill.station.builder import kinect_camera_info
+
+    return kinect_camera_info(camera), RigidTransform(look_at(camera.position, camera.target))
+
+
+# --------------------------------------------------------------------------- the station
+class HardwareStation(Diagram):
+    """The hardware port (see the module docstring for what it does).
+
+    Handles a runner needs: ``config`` (the StationConfig of the scenario),
+    ``hardware_config``, ``lcm``, ``realtime`` (True), ``ee_controller``;
+    :meth:`reset`, :meth:`object_pose`, :meth:`set_reset_hook`.
+
+    Args:
+        config: the :class:`HardwareConfig`.
+        lcm: a DrakeLcm to use (default: a new one on ``config.lcm_url``). The
+            station owns its LcmInterfaceSystem: it is the one that handles
+            the subscriptions of that DrakeLcm.
+        meshcat: unused (kept for the signature of ``build_station``).
+    """
+
+    realtime = True
+    #: The robot has no simulator truth: ``object_state`` is NaN unless a
+    #: simulated robot publishes it on ``ground_truth_channel``.
+    has_ground_truth = False
+
+    def __init__(self, config: HardwareConfig, lcm: DrakeLcm | None = None, meshcat=None):
+        super().__init__()
+        self.hardware_config = validate_hardware_config(config)
+        self.config = config.station
+        self.lcm = lcm if lcm is not None else DrakeLcm(config.lcm_url)
+        self._reset_hook = None
+        builder = DiagramBuilder()
+        builder.AddNamedSystem("lcm", LcmInterfaceSystem(self.lcm))
+
+        # Status in.
+        self._status_sub = builder.AddNamedSystem("status_subscriber", LcmSubscriberSystem.Make(
+            config.status_channel, lcmt_panda_status, self.lcm, use_cpp_serializer=True))
+        receiver = builder.AddNamedSystem("status_receiver", PandaStatusReceiver(N_JOINTS))
+        builder.Connect(self._status_sub.get_output_port(), receiver.get_input_port())
+        self._status_py = builder.AddNamedSystem("status_monitor_subscriber", LcmSubscriberSystem.Make(
+            config.status_channel, lcmt_panda_status, self.lcm))
+        self.monitor = builder.AddNamedSystem("status_monitor", StatusMonitor(
+            STATUS_CHECK_PERIOD, config.status_timeout, reflex_limits(self.config), config.status_channel))
+        builder.Connect(self._status_py.get_output_port(), self.monitor.GetInputPort("status"))
+        builder.Connect(receiver.get_torque_external_output_port(), self.monitor.GetInputPort("torque_external"))
+        state = builder.AddNamedSystem("panda_state", Multiplexer([N_JOINTS, N_JOINTS]))
+        builder.Connect(receiver.get_position_measured_output_port(), state.get_input_port(0))
+        builder.Connect(receiver.get_velocity_measured_output_port(), state.get_input_port(1))
+        builder.ExportOutput(state.get_output_port(), "panda_state")
+        fk = builder.AddNamedSystem("ee_pose", ForwardKinematics())
+        builder.Connect(state.get_output_port(), fk.get_input_port())
+        builder.ExportOutput(fk.get_output_port(), "ee_pose")
+        self._receiver = receiver
+
+        # Hand pose in, joint position commands out.
+        ws = config.workspace
+        clip = builder.AddNamedSystem("workspace_clip", WorkspaceClip(ws.lower, ws.upper))
+        builder.ExportInput(clip.get_input_port(), "ee_pose_desired")
+        controller = builder.AddNamedSystem("ee_controller", EndEffectorController(
+            self.config.controller, self.config.q_home))
+        self.ee_controller = controller
+        builder.Connect(clip.get_output_port(), controller.GetInputPort("X_WE_desired"))
+        q_only = builder.AddNamedSystem("q_commanded", _Selector(2 * N_JOINTS, N_JOINTS))
+        builder.Connect(controller.GetOutputPort("panda_state_desired"), q_only.get_input_port())
+        encoder = builder.AddNamedSystem("command_encoder", PandaCommandEncoder())
+        builder.Connect(q_only.get_output_port(), encoder.get_input_port())
+        publisher = builder.AddNamedSystem("command_publisher", LcmPublisherSystem.Make(
+            config.command_channel, lcmt_panda_command, self.lcm, publish_period=config.command_period))
+        builder.Connect(encoder.get_output_port(), publisher.get_input_port())
+
+        # Gripper.
+        hand = builder.AddNamedSystem("hand_command", SchunkWsgCommandSender())
+        builder.ExportInput(hand.GetInputPort("position"), "gripper_command")
+        force = builder.AddNamedSystem("hand_force", ConstantVectorSource([config.hand_force]))
+        builder.Connect(force.get_output_port(), hand.GetInputPort("force_limit"))
+        hand_pub = builder.AddNamedSystem("hand_publisher", LcmPublisherSystem.Make(
+            config.hand_command_channel, lcmt_schunk_wsg_command, self.lcm, publish_period=0.1,
+            use_cpp_serializer=True))
+        builder.Connect(hand.get_output_port(), hand_pub.get_input_port())
+
+        # No ground truth on the robot; a simulated robot publishes its own.
+        self._truth_sub = None
+        if config.ground_truth_channel:
+            truth_sub = self._truth_sub = builder.AddNamedSystem("ground_truth_subscriber", LcmSubscriberSystem.Make(
+                config.ground_truth_channel, lcmt_scope, self.lcm))
+            truth = builder.AddNamedSystem("object_state", GroundTruthDecoder())
+            builder.Connect(truth_sub.get_output_port(), truth.get_input_port())
+        else:
+            truth = builder.AddNamedSystem("object_state", ConstantVectorSource([np.nan]))
+        builder.ExportOutput(truth.get_output_port(), "object_state")
+        no_contact = builder.AddNamedSystem("contact_results", ConstantValueSource(
+            AbstractValue.Make(ContactResults())))
+        builder.ExportOutput(no_contact.get_output_port(), "contact_results")
+        builder.ExportOutput(receiver.get_torque_external_output_port(), "external_torque")
+        builder.ExportOutput(controller.GetOutputPort("joint_acceleration_commanded"),
+                             "joint_acceleration_commanded")
+        self.placed_pose = builder.AddNamedSystem("placed_object_pose", PlacedObjectPose())
+
+        self._camera_sub = None
+        if self.config.enable_camera:
+            self._add_camera(builder)
+        builder.BuildInto(self)
+        self.set_name("hardware_station")
+
+    def _add_camera(self, builder) -> None:
+        config = self.hardware_config
+        info, X_WC = camera_geometry(self.config)
+        self.camera_info, self._X_WC = info, X_WC
+        if config.camera_source == "realsense":  # pragma: no cover - needs a device
+            cam = builder.AddNamedSystem("camera", RealSenseCamera(info.width(), info.height(), 10.0))
+            color, depth = cam.GetOutputPort("color_image"), cam.GetOutputPort("depth_image")
+            from pydrake.systems.sensors import ImageLabel16I
+            label = builder.AddNamedSystem("label_image", ConstantValueSource(
+                AbstractValue.Make(ImageLabel16I(info.width(), info.height())))).get_output_port()
+        else:
+            self._camera_sub = builder.AddNamedSystem("camera_subscriber", LcmSubscriberSystem.Make(
+                config.camera_channel, lcmt_image_array, self.lcm))
+            images = builder.AddNamedSystem("camera_images", LcmImageArrayDecoder(info.width(), info.height()))
+            builder.Connect(self._camera_sub.get_output_port(), images.get_input_port())
+            color, depth, label = (images.GetOutputPort(name) for name in ("color_image", "depth_image",
+                                                                           "label_image"))
+        to_cloud = builder.AddNamedSystem("depth_to_cloud", DepthImageToPointCloud(
+            info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
+        builder.Connect(depth, to_cloud.depth_image_input_port())
+        builder.Connect(color, to_cloud.color_image_input_port())
+        pose = builder.AddNamedSystem("camera_pose", ConstantValueSource(AbstractValue.Make(X_WC)))
+        builder.Connect(pose.get_output_port(), to_cloud.camera_pose_input_port())
+        builder.ExportOutput(to_cloud.point_cloud_output_port(), "point_cloud")
+        builder.ExportOutput(color, "color_image")
+        builder.ExportOutput(depth, "depth_image")
+        builder.ExportOutput(label, "label_image")
+
+    # ------------------------------------------------------------------ object placement
+    def nominal_object_pose(self) -> RigidTransform:
+        return Station.nominal_object_pose(self)      # the simulated station's formula, on self.config
+
+    def random_object_pose(self, seed: int) -> RigidTransform:
+        return Station.random_object_pose(self, seed)
+
+    def camera_pose(self) -> RigidTransform:
+        if not self.config.enable_camera:
+            raise ValueError("this station was built with enable_camera = false")
+        return self._X_WC
+
+    def set_reset_hook(self, hook: Callable[[int | None, RigidTransform], None] | None) -> None:
+        """``hook(seed, X_WO)`` is called by :meth:`reset` before it reads the robot:
+        a human places the object at X_WO and confirms (``hardware run`` prompts
+        for the Enter key). None: no wait (a simulated robot resets itself)."""
+        self._reset_hook = hook
+
+    def robot_scene_contact(self, context) -> tuple[float, np.ndarray]:
+        """(contact force [N], external joint torques (7) [N m]) as the robot measures
+        them: the Panda estimates the external joint torques (the driver's
+        ``joint_torque_external``) but not the contact force, reported as 0."""
+        tau = self.GetOutputPort("external_torque").Eval(self.GetMyContextFromRoot(context))
+        return 0.0, np.asarray(tau, dtype=float)
+
+    def object_pose(self, context) -> RigidTransform:
+        """The pose the object was placed at for this run (no ground truth on hardware)."""
+        return self.placed_pose.get_pose(self.placed_pose.GetMyContextFromRoot(context))
+
+    # ------------------------------------------------------------------ reset
+    def _pump_until(self, subscriber, what: str, timeout: float) -> None:
+        """Handles LCM until ``subscriber`` receives a new message; StaleStatusError after ``timeout`` s."""
+        count = subscriber.WaitForMessage(-1, None, 1e-4)
+        deadline = time.monotonic() + timeout
+        while True:
+            self.lcm.HandleSubscriptions(5)
+            if subscriber.WaitForMessage(count, None, 1e-4) > count:
+                return
+            if time.monotonic() > deadline:
+                config = self.hardware_config
+                raise StaleStatusError(
+                    f"no {what} within {timeout:.1f} s on LCM {config.lcm_url or '(default URL)'}: "
+                    "is the driver (or drake-skill sim-robot) running with the same URL and channels?")
+
+    def reset(self, context, seed: int | None = None) -> RigidTransform:
+        """Prepares a context just set to its defaults for a run on the robot.
+
+        Calls the reset hook (a human places the object at X_WO drawn from
+        ``seed``, as the simulated station would place it), waits for a fresh
+        status (and camera frame), loads them into ``context``, starts the
+        controller at the measured joint positions (the first command holds
+        the robot where it is) and the status monitor at the context's time.
+        Returns X_WO.
+        """
+        X_WO = self.nominal_object_pose() if seed is None else self.random_object_pose(seed)
+        if self._reset_hook is not None:
+            self._reset_hook(seed, X_WO)
+        timeout = self.hardware_config.reset_timeout
+        self._pump_until(self._status_sub, "robot status", timeout)
+        if self._camera_sub is not None:
+            self._pump_until(self._camera_sub, "camera image", timeout)
+        self.lcm.HandleSubscriptions(0)
+        for sub in (self._status_sub, self._status_py, self._camera_sub, self._truth_sub):
+            if sub is not None:
+                sub.ExecuteForcedEvents(sub.GetMyMutableContextFromRoot(context))
+        station_context = self.GetMyContextFromRoot(context)
+        q = self.GetOutputPort("panda_state").Eval(station_context)[:N_JOINTS]
+        self.ee_controller.set_joint_positions(context, q)
+        self.monitor.mark_fresh(self.monitor.GetMyMutableContextFromRoot(context))
+        self.placed_pose.set_pose(self.placed_pose.GetMyMutableContextFromRoot(context), X_WO)
+        return X_WO
+
+
+class _Selector(LeafSystem):
+    """The first ``m`` entries of an ``n``-vector."""
+
+    def __init__(self, n: int, m: int):
+        super().__init__()
+        self._m = m
+        self._u = self.DeclareVectorInputPort("u", n)
+        self.DeclareVectorOutputPort("y", m, self._calc_y, {self._u.ticket()})
+
+    def _calc_y(self, context, output):
+        output.SetFromVector(self._u.Eval(context)[:self._m])
+
+
+def build_hardware_station(config: HardwareConfig | None = None, lcm: DrakeLcm | None = None,
+                           meshcat=None) -> HardwareStation:
+    """Builds the hardware station described by ``config`` (defaults: the Open scenario)."""
+    return HardwareStation(config if config is not None else HardwareConfig(), lcm=lcm, meshcat=meshcat)

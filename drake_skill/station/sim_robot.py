@@ -1,0 +1,362 @@
+"""A simulated Panda that speaks the drake-franka-driver's LCM protocol.
+
+The simulated station (``drake_skill.station.builder``, with its joint
+impedance set points as the input) behind Drake's driver-side systems::
+
+    LCM PANDA_COMMAND --> [PandaCommandReceiver] --> [driver checks] --> [q, v] --> Station (plant, object, camera)
+    Station --> [PandaStatusSender] --> LCM PANDA_STATUS
+    LCM PANDA_HAND_COMMAND --> [SchunkWsgCommandReceiver] --> gripper_command
+    Station colour/depth/label images --> [ImageToLcmImageArrayT] --> LCM camera channel
+
+The driver checks (:class:`DriverChecks`) are the drake-franka-driver's in
+position mode: a command must expect position control with 7 joint
+positions and no velocities or torques (else the driver throws:
+:class:`DriverProtocolError`), and a command whose wall-clock ``utime`` is
+more than ``expire_sec`` (0.1 s) away from the wall clock is dropped, the
+last accepted position held. Status goes out every plant step with
+Drake's ``PandaStatusSender`` (it stamps simulation time, which the hardware
+station does not read); the external joint torque reported is the
+station's ``external_torque`` (the contact forces' generalized force on the
+arm), as the driver reports the robot's estimate.
+
+Run it in its own thread (:meth:`SimRobot.start`, real time) or process
+(``drake-skill sim-robot``); with the camera on, the thread that runs it
+must be the only one that evaluates its images (the renderer's EGL context
+lives in one thread). The ground truth stays here:
+:meth:`SimRobot.object_state` and :meth:`SimRobot.judge`.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+from drake import (lcmt_image_array, lcmt_panda_command, lcmt_panda_status, lcmt_schunk_wsg_command,
+                   lcmt_scope)
+from pydrake.common.value import AbstractValue
+from pydrake.lcm import DrakeLcm
+from pydrake.manipulation import (PandaCommandReceiver, PandaControlMode, PandaStatusSender,
+                                  SchunkWsgCommandReceiver)
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
+from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, StateInterpolatorWithDiscreteDerivative
+from pydrake.systems.sensors import ImageToLcmImageArrayT
+
+from drake_skill.station.builder import Station
+from drake_skill.station.hardware_config import HardwareConfig, validate_hardware_config
+from drake_skill.station.success import judge_success
+
+N_JOINTS = 7
+
+
+class DriverProtocolError(RuntimeError):
+    """A command the drake-franka-driver would refuse (it throws on these)."""
+
+
+class DriverChecks(LeafSystem):
+    """The driver's acceptance of position commands.
+
+    Inputs: ``command`` (Python ``lcmt_panda_command``), ``position`` (7, the
+    PandaCommandReceiver's output), ``position_measured`` (7). Output
+    ``position`` (7): the last accepted command. Discrete state [held q (7),
+    accepted count, dropped count]. Every ``period`` s the latest message is
+    checked: a wrong control mode or sizes raise DriverProtocolError; a
+    ``utime`` more than ``expire_sec`` from the wall clock [us] is dropped.
+    At initialization the measured position is held (the driver starts at
+    the robot's position).
+    """
+
+    def __init__(self, period: float, expire_sec: float = 0.1):
+        super().__init__()
+        self._expire_us = float(expire_sec) * 1e6
+        self._msg = self.DeclareAbstractInputPort("command", AbstractValue.Make(lcmt_panda_command()))
+        self._q = self.DeclareVectorInputPort("position", N_JOINTS)
+        self._q_meas = self.DeclareVectorInputPort("position_measured", N_JOINTS)
+        self._state = self.DeclareDiscreteState(N_JOINTS + 3)   # [q_hold, accepted, dropped, last utime]
+        self.DeclareInitializationDiscreteUpdateEvent(self._latch)
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._check)
+        self.DeclareVectorOutputPort("position", N_JOINTS, self._calc_position, {self.xd_ticket()})
+
+    def counts(self, context) -> tuple[int, int]:
+        """(accepted, dropped) distinct commands so far in ``context``."""
+        x = context.get_discrete_state(self._state).get_value()
+        return int(x[N_JOINTS]), int(x[N_JOINTS + 1])
+
+    def _latch(self, context, discrete_state):
+        x = np.zeros(N_JOINTS + 3)
+        x[:N_JOINTS] = self._q_meas.Eval(context)
+        x[N_JOINTS + 2] = float(self._msg.Eval(context).utime)   # a message from before the reset is old
+        discrete_state.set_value(self._state, x)
+
+    def _check(self, context, discrete_state):
+        msg = self._msg.Eval(context)
+        x = context.get_discrete_state(self._state).get_value().copy()
+        if msg.utime == 0 or float(msg.utime) == x[N_JOINTS + 2]:
+            return
+        x[N_JOINTS + 2] = float(msg.utime)
+        if (msg.control_mode_expected != lcmt_panda_status.CONTROL_MODE_POSITION
+                or msg.num_joint_position != N_JOINTS or msg.num_joint_velocity or msg.num_joint_torque):
+            raise DriverProtocolError(
+                f"command refused: control_mode_expected {msg.control_mode_expected}, "
+                f"{msg.num_joint_position} positions, {msg.num_joint_velocity} velocities, "
+                f"{msg.num_joint_torque} torques (expected position mode with {N_JOINTS} positions)")
+        if abs(time.time() * 1e6 - msg.utime) > self._expire_us:
+            x[N_JOINTS + 1] += 1                       # expired: dropped, position held
+        else:
+            x[:N_JOINTS] = self._q.Eval(context)
+            x[N_JOINTS] += 1
+        discrete_state.set_value(self._state, x)
+
+    def _calc_position(self, context, output):
+        output.SetFromVector(context.get_discrete_state(self._state).get_value()[:N_JOINTS])
+
+
+class GroundTruthEncoder(LeafSystem):
+    """``object_state`` [1] in, ``lcmt_scope`` (utime = simulation time [us]) out."""
+
+    def __init__(self):
+        super().__init__()
+        self._x = self.DeclareVectorInputPort("object_state", 1)
+        self.DeclareAbstractOutputPort("lcmt_scope", lambda: AbstractValue.Make(lcmt_scope()),
+                                       self._calc_message, {self._x.ticket(), self.time_ticket()})
+
+    def _calc_message(self, context, output):
+        msg = lcmt_scope()
+        msg.utime = int(context.get_time() * 1e6)
+        msg.size = 1
+        msg.value = [float(self._x.Eval(context)[0])]
+        output.set_value(msg)
+
+
+#: The station input that carries the joint set points [q, v] (14) in the simulated robot.
+JOINT_COMMAND_PORT = "ee_pose_desired"
+_BUILD_LOCK = threading.Lock()
+
+
+class _JointSetPoints(Diagram):
+    """Stands in for the station's end-effector controller: input ``X_WE_desired``
+    is the joint set point [q, v] (14) itself, passed to ``panda_state_desired``."""
+
+    def __init__(self, config, q_home):
+        super().__init__()
+        from pydrake.systems.primitives import PassThrough
+
+        builder = DiagramBuilder()
+        through = builder.AddNamedSystem("set_points", PassThrough(2 * N_JOINTS))
+        zeros = builder.AddNamedSystem("zero_acceleration", ConstantVectorSource(np.zeros(N_JOINTS)))
+        builder.ExportInput(through.get_input_port(), "X_WE_desired")
+        builder.ExportOutput(through.get_output_port(), "panda_state_desired")
+        builder.ExportOutput(zeros.get_output_port(), "joint_acceleration_commanded")
+        builder.BuildInto(self)
+
+    def set_joint_positions(self, context, q) -> None:
+        """Nothing to reset: the set points come from the driver."""
+
+
+def _joint_command_station(station_config, meshcat) -> Station:
+    """The simulated station with the joint set points as its command input.
+
+    The Panda's joint impedance tracks [q, v] from the driver instead of the
+    end-effector controller's; the station is built with :class:`_JointSetPoints`
+    in the controller's place (so nothing of the station is duplicated), and
+    its ``ee_pose_desired`` input (:data:`JOINT_COMMAND_PORT`) then carries [q, v].
+    """
+    from drake_skill.station import builder as station_builder
+
+    with _BUILD_LOCK:
+        original = station_builder.EndEffectorController
+        station_builder.EndEffectorController = _JointSetPoints
+        try:
+            station = Station(station_config, meshcat)
+        finally:
+            station_builder.EndEffectorController = original
+    port = station.GetInputPort(JOINT_COMMAND_PORT)
+    if port.size() != 2 * N_JOINTS:
+        raise AssertionError("the station did not take the joint set points in its controller's place")
+    return station
+
+
+class SimRobot:
+    """The simulated station behind the driver's LCM protocol, on its own simulator.
+
+    Args:
+        config: the :class:`HardwareConfig` (its ``station`` is the scenario,
+            its channels and URL the driver's).
+        lcm: a DrakeLcm to use (default: a new one on ``config.lcm_url``).
+        pump: add an LcmInterfaceSystem to handle ``lcm``'s subscriptions.
+            With the hardware station in the same process on the same
+            (``memq://``) DrakeLcm, pass False: one DrakeLcm must be handled
+            by one thread, and the hardware station's does it (messages reach
+            this diagram's subscribers from that thread; publishing is
+            thread-safe).
+        expire_sec: the driver's ``--expire_sec``.
+    """
+
+    def __init__(self, config: HardwareConfig | None = None, lcm: DrakeLcm | None = None,
+                 pump: bool = True, meshcat=None, expire_sec: float = 0.1):
+        self.config = validate_hardware_config(config if config is not None else HardwareConfig())
+        self.lcm = lcm if lcm is not None else DrakeLcm(self.config.lcm_url)
+        station_config = self.config.station
+        step = float(station_config.time_step)
+        builder = DiagramBuilder()
+        self.station = builder.AddNamedSystem("station", _joint_command_station(station_config, meshcat))
+        if pump:
+            builder.AddNamedSystem("lcm", LcmInterfaceSystem(self.lcm))
+        split = builder.AddNamedSystem("state_split", Demultiplexer([N_JOINTS, N_JOINTS]))
+        builder.Connect(self.station.GetOutputPort("panda_state"), split.get_input_port())
+
+        # Commands in.
+        sub = builder.AddNamedSystem("command_subscriber", LcmSubscriberSystem.Make(
+            self.config.command_channel, lcmt_panda_command, self.lcm, use_cpp_serializer=True))
+        receiver = builder.AddNamedSystem("command_receiver", PandaCommandReceiver(
+            N_JOINTS, PandaControlMode.kPosition))
+        builder.Connect(sub.get_output_port(), receiver.get_message_input_port())
+        builder.Connect(split.get_output_port(0), receiver.get_position_measured_input_port())
+        sub_py = builder.AddNamedSystem("command_check_subscriber", LcmSubscriberSystem.Make(
+            self.config.command_channel, lcmt_panda_command, self.lcm))
+        self.checks = builder.AddNamedSystem("driver_checks", DriverChecks(step, expire_sec))
+        builder.Connect(sub_py.get_output_port(), self.checks.GetInputPort("command"))
+        builder.Connect(receiver.get_commanded_position_output_port(), self.checks.GetInputPort("position"))
+        builder.Connect(split.get_output_port(0), self.checks.GetInputPort("position_measured"))
+        self._interp = builder.AddNamedSystem("desired_state", StateInterpolatorWithDiscreteDerivative(
+            N_JOINTS, step, suppress_initial_transient=True))
+        builder.Connect(self.checks.GetOutputPort("position"), self._interp.get_input_port())
+        builder.Connect(self._interp.get_output_port(), self.station.GetInputPort(JOINT_COMMAND_PORT))
+
+        # Status out.
+        sender = builder.AddNamedSystem("status_sender", PandaStatusSender(N_JOINTS))
+        zeros = builder.AddNamedSystem("zeros", ConstantVectorSource(np.zeros(N_JOINTS)))
+        builder.Connect(self.checks.GetOutputPort("position"), sender.get_position_commanded_input_port())
+        builder.Connect(split.get_output_port(0), sender.get_position_measured_input_port())
+        builder.Connect(split.get_output_port(1), sender.get_velocity_measured_input_port())
+        for port in (sender.get_velocity_commanded_input_port(), sender.get_acceleration_commanded_input_port(),
+                     sender.get_torque_commanded_input_port(), sender.get_torque_measured_input_port()):
+            builder.Connect(zeros.get_output_port(), port)
+        if self.station.HasOutputPort("external_torque"):
+            builder.Connect(self.station.GetOutputPort("external_torque"), sender.get_torque_external_input_port())
+        else:
+            builder.Connect(zeros.get_output_port(), sender.get_torque_external_input_port())
+        status_pub = builder.AddNamedSystem("status_publisher", LcmPublisherSystem.Make(
+            self.config.status_channel, lcmt_panda_status, self.lcm, publish_period=step,
+            use_cpp_serializer=True))
+        builder.Connect(sender.get_output_port(), status_pub.get_input_port())
+
+        # The hand.
+        hand_sub = builder.AddNamedSystem("hand_subscriber", LcmSubscriberSystem.Make(
+            self.config.hand_command_channel, lcmt_schunk_wsg_command, self.lcm, use_cpp_serializer=True))
+        hand = builder.AddNamedSystem("hand_receiver", SchunkWsgCommandReceiver(
+            station_config.gripper_home, self.config.hand_force))
+        builder.Connect(hand_sub.get_output_port(), hand.get_input_port())
+        builder.Connect(hand.GetOutputPort("position"), self.station.GetInputPort("gripper_command"))
+
+        # The ground truth, for the hardware station's object_state.
+        if self.config.ground_truth_channel:
+            truth = builder.AddNamedSystem("ground_truth_encoder", GroundTruthEncoder())
+            builder.Connect(self.station.GetOutputPort("object_state"), truth.get_input_port())
+            truth_pub = builder.AddNamedSystem("ground_truth_publisher", LcmPublisherSystem.Make(
+                self.config.ground_truth_channel, lcmt_scope, self.lcm, publish_period=0.01))
+            builder.Connect(truth.get_output_port(), truth_pub.get_input_port())
+
+        # The camera.
+        if self.station.HasOutputPort("color_image"):
+            images = builder.AddNamedSystem("camera_encoder", ImageToLcmImageArrayT("color", "depth", "label"))
+            for name in ("color", "depth", "label"):
+                builder.Connect(self.station.GetOutputPort(f"{name}_image"), images.GetInputPort(name))
+            camera_pub = builder.AddNamedSystem("camera_publisher", LcmPublisherSystem.Make(
+                self.config.camera_channel, lcmt_image_array, self.lcm,
+                publish_period=1.0 / float(station_config.camera.fps), use_cpp_serializer=True))
+            builder.Connect(images.image_array_t_msg_output_port(), camera_pub.get_input_port())
+
+        self.diagram = builder.Build()
+        # The context (with the camera's renderer, an EGL context that
+        # renders in the thread that made it) is created by the thread that
+        # runs the simulator: see _prepare.
+        self.context = None
+        self.simulator = None
+        self._thread = None
+        self._stop = threading.Event()
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self.X_WO = None
+
+    # ------------------------------------------------------------------ runs
+    def _prepare(self, seed: int | None) -> None:
+        """In the running thread: context (made once), defaults, object pose from ``seed``."""
+        if self.context is None:
+            self.context = self.diagram.CreateDefaultContext()
+            self.simulator = Simulator(self.diagram, self.context)
+            self.simulator.set_target_realtime_rate(1.0)
+        self.diagram.SetDefaultContext(self.context)
+        self.context.SetTime(0.0)
+        self.X_WO = self.station.reset(self.context, seed)
+        self._interp.set_initial_position(self._interp.GetMyMutableContextFromRoot(self.context),
+                                          self.station.config.q_home)
+        self.simulator.Initialize()
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def start(self, seed: int | None = None, timeout: float = 60.0) -> None:
+        """Resets (arm at home, at rest; object at the pose drawn from ``seed``) and runs
+        the simulator in real time in a background thread until :meth:`stop`.
+        Returns once the robot runs (its first status is on its way)."""
+        if self.running:
+            raise RuntimeError("SimRobot already running: call stop() first")
+        self._stop.clear()
+        self._ready.clear()
+        self._error = None
+        self._thread = threading.Thread(target=self._loop, args=(seed,), name="sim-robot", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(timeout) or self._error is not None:
+            self.stop()
+            raise RuntimeError("the simulated robot did not start")
+
+    def _loop(self, seed) -> None:
+        try:
+            self._prepare(seed)
+            self._ready.set()
+            while not self._stop.is_set():
+                self.simulator.AdvanceTo(self.context.get_time() + 0.02)
+        except BaseException as error:   # reported by stop()
+            self._error = error
+            self._ready.set()
+
+    def run(self, duration: float, seed: int | None = None) -> None:
+        """Resets to ``seed`` and runs in real time in this thread for ``duration`` s (inf: until interrupted)."""
+        self._prepare(seed)
+        if duration == float("inf"):
+            while True:
+                self.simulator.AdvanceTo(self.context.get_time() + 0.1)
+        self.simulator.AdvanceTo(float(duration))
+
+    def stop(self) -> None:
+        """Stops the background thread (status and camera stop); re-raises its error."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=10.0)
+            self._thread = None
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+
+    # ------------------------------------------------------------------ ground truth
+    def time(self) -> float:
+        return self.context.get_time()
+
+    def station_context(self):
+        return self.station.GetMyContextFromRoot(self.context)
+
+    def object_state(self) -> float:
+        """Lid angle [rad] or drawer travel [m] now (read when stopped; renders nothing)."""
+        return float(self.station.GetOutputPort("object_state").Eval(self.station_context())[0])
+
+    def judge(self, skill: str) -> bool:
+        """Ground-truth success of ``skill`` for the object state now."""
+        return judge_success(skill, self.object_state(), self.station.config.success)
+
+    def command_counts(self) -> tuple[int, int]:
+        """(accepted, dropped-as-expired) commands since the last reset."""
+        return self.checks.counts(self.checks.GetMyContextFromRoot(self.context))

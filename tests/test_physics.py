@@ -1,0 +1,158 @@
+"""A physically honest station (issue 10): weight, reflex, rate limits, solver at rest, judges."""
+
+import logging
+import math
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw
+
+from drake_skill.station import limits
+from drake_skill.station.config import scenario_for_skill
+from drake_skill.station.pose_source import PosePlan, hold_plan
+from drake_skill.station.scripted import scripted_plan
+from drake_skill.station.simulation import ReflexError, StationSimulation
+
+logging.getLogger("drake").setLevel(logging.ERROR)
+
+#: The lid's tipping angle [rad]: its centre of mass (-0.1125, 0.01) m from the
+#: hinge in the lid frame is above the hinge at atan(0.1125 / 0.01).
+TIPPING = math.atan2(0.1125, 0.01)
+
+
+def _config(skill, **object_fields):
+    config = scenario_for_skill(skill)
+    config.enable_camera = False
+    for k, v in object_fields.items():
+        setattr(config.object, k, v)
+    return config
+
+
+@pytest.fixture(scope="module")
+def box_sim():
+    return StationSimulation(_config("open"))
+
+
+@pytest.mark.parametrize("offset_deg,falls_open", [(-4.0, False), (4.0, True)])
+def test_lid_falls_by_its_weight_across_the_tipping_angle(box_sim, offset_deg, falls_open):
+    box_sim.reset(0)
+    box_sim.station.set_object_joint(box_sim.context, TIPPING + math.radians(offset_deg))
+    log = box_sim.run(None, 3.0, record_hz=20)
+    if falls_open:
+        assert log.final_object_state == pytest.approx(1.9, abs=0.01)     # on its stay, and stays
+        assert np.all(log.object_state[-20:] > 1.85)
+    else:
+        assert log.final_object_state < 0.02                              # shut
+    assert box_sim.judge("open") == falls_open
+
+
+def test_arm_holds_home_for_60_s_with_the_gripper_commanded_closed(box_sim):
+    """The SAP failure at rest (fingers on their joint limit in a weightless,
+    motionless scene) must not come back: 60 s of holding, gripper at 0 m."""
+    box_sim.reset(0)
+    home = box_sim.home_pose()
+    log = box_sim.run(hold_plan(home, 0.0), 60.0, record_hz=2)
+    assert np.max(np.abs(log.q[-1] - np.asarray(box_sim.config.q_home))) < 2e-3
+    assert np.linalg.norm(log.ee_pose[-1, :3] - home.translation()) < 1e-3
+    assert log.peak_force == 0.0
+
+
+def test_commanded_joint_accelerations_stay_within_franka_limits_on_a_step(box_sim):
+    """A 20 cm step of the hand pose: the rate limiter keeps the commanded
+    acceleration and velocity within Franka's limits at every 1 ms tick."""
+    box_sim.reset(0)
+    home = box_sim.home_pose()
+    step = RigidTransform(home.rotation(), home.translation() + [0.10, 0.15, -0.10])
+    box_sim.set_plan(hold_plan(step, 0.08))
+    station, context = box_sim.station, box_sim.station_context()
+    acc_port = station.GetOutputPort("joint_acceleration_commanded")
+    state_port = station.ee_controller.GetOutputPort("panda_state_desired")
+    ctrl_context = station.ee_controller.GetMyContextFromRoot(box_sim.context)
+    peak_a, peak_v, prev_v = np.zeros(7), np.zeros(7), None
+    for k in range(1, 1500):
+        box_sim.simulator.AdvanceTo(k * 1e-3)
+        a = np.asarray(acc_port.Eval(context))
+        v = np.asarray(state_port.Eval(ctrl_context))[7:]
+        peak_a, peak_v = np.maximum(peak_a, np.abs(a)), np.maximum(peak_v, np.abs(v))
+        if prev_v is not None:
+            assert np.all(np.abs(v - prev_v) <= limits.QDD_MAX * 1e-3 * (1 + 1e-9))
+        prev_v = v
+    assert np.all(peak_a <= limits.QDD_MAX * (1 + 1e-9)) and np.all(peak_v <= limits.QD_MAX * (1 + 1e-9))
+    # The limits are reached (the step is a real test of the limiter), and the hand arrives.
+    assert np.any(peak_a > 0.5 * limits.QDD_MAX)
+    box_sim.run(None, 1.5, record_hz=10)
+    assert np.linalg.norm(box_sim.ee_pose().translation() - step.translation()) < 5e-3
+
+
+@pytest.fixture(scope="module")
+def reflex_sim():
+    config = _config("open")
+    config.reflex.enabled = True
+    return StationSimulation(config)
+
+
+def test_pressing_the_hand_into_the_lid_trips_the_reflex(reflex_sim):
+    X_WO = reflex_sim.reset(0)
+    home = reflex_sim.home_pose()
+    # Hand pointing down over the closed lid (top at z = 0.15 m), then its TCP
+    # 3 cm below the top: fingers and housing pressed into the lid.
+    above = RigidTransform(home.rotation(), X_WO @ np.array([0.0, 0.0, 0.30]))
+    into = RigidTransform(home.rotation(), X_WO @ np.array([0.0, 0.0, 0.12]))
+    plan = PosePlan.from_poses([0.0, 2.0, 4.0], [home, above, into], [0.0, 0.0, 0.0])
+    box_sim = reflex_sim
+    with pytest.raises(ReflexError) as info:
+        box_sim.run(plan, 5.0, record_hz=20)
+    error = info.value
+    assert error.reason == "reflex"
+    assert 2.0 < error.time_s < 5.0
+    assert error.force_N > box_sim.config.reflex.contact_force_max or error.cause.startswith("torque")
+    assert "collision reflex" in str(error)
+
+
+@pytest.mark.xfail(strict=True, reason="issue 10 open: the scripted motions are not yet reworked to "
+                   "stay below the 30 N reflex with the lid's weight (the shipped scenarios keep the "
+                   "reflex off until they are)")
+@pytest.mark.parametrize("skill", ["open", "close", "draw"])
+def test_scripted_skills_succeed_on_10_seeds_below_the_reflex_and_parked_fails(skill):
+    config = _config(skill)
+    config.reflex.enabled = True
+    sim = StationSimulation(config)
+    limit = sim.config.reflex.contact_force_max
+    for seed in range(10):
+        X_WO = sim.reset(seed)
+        plan = scripted_plan(skill, X_WO, sim.home_pose())
+        log = sim.run(plan, plan.duration + sim.config.success.settle_time, record_hz=20)
+        assert sim.judge_log(skill, log), f"{skill} seed {seed}: final {log.final_object_state:.3f}"
+        assert log.peak_force < limit
+    sim.reset(3)
+    log = sim.run(None, 4.0, record_hz=10)
+    assert not sim.judge_log(skill, log)
+    assert np.ptp(log.object_state) < 1e-3
+
+
+def test_no_robot_self_collision_at_home():
+    """Without the station's robot-internal filter, no two robot geometries overlap at q_home."""
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+    from pydrake.systems.framework import DiagramBuilder
+
+    from drake_skill.station.controller import X_FLANGE_HAND
+    from drake_skill.station.models import add_package_paths, model_url
+
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
+    parser = Parser(plant)
+    add_package_paths(parser.package_map())
+    arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
+    hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
+    plant.WeldFrames(plant.GetFrameByName("panda_link8", arm), plant.GetFrameByName("panda_hand", hand),
+                     X_FLANGE_HAND)
+    plant.Finalize()
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), arm, scenario_for_skill("open").q_home)
+    query = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(context))
+    pairs = query.ComputePointPairPenetration()
+    inspector = query.inspector()
+    assert [(inspector.GetName(p.id_A), inspector.GetName(p.id_B)) for p in pairs] == []
