@@ -124,8 +124,9 @@ def test_hand_hiding_the_object_clears_the_flag_and_holds_outputs():
     """A camera looking at the box from the side at table height; the hand moves in front
     of the box (it hides about 90 % of it), stays, and goes back home."""
     config = StationConfig()
-    config.camera.position = [0.55, -1.15, 0.30]
-    config.camera.target = [0.55, 0.0, 0.07]
+    from pydrake.common.schema import Transform
+    from drake_skill.common import look_at
+    config.camera.X_PB = Transform(RigidTransform(look_at([0.55, -1.15, 0.30], [0.55, 0.0, 0.07])))
     rig = Rig(config)
     rig.reset(0)
     R = RotationMatrix.MakeZRotation(math.pi / 2) @ rig.home.rotation()   # palm toward the camera

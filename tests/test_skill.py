@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from drake_skill.demos.demonstrator import DemonstratorConfig, ScriptedDemonstrator, StationRecorder, make_perception
+from drake_skill.demos.demonstrator import DemonstratorConfig, ScriptedDemonstrator
 from drake_skill.station.pose_source import hold_plan
 from drake_skill.skill import Skill, default_skill_config, fit_skill, hold_invalid
 
@@ -13,7 +13,7 @@ def _parked_goal_clouds(demonstrator, seed, duration=6.0):
     sim = demonstrator.sim
     sim.reset(seed)
     sim.set_plan(hold_plan(sim.home_pose()))
-    recorder = StationRecorder(sim.station, sim.context, sim.simulator, 10.0, 10.0, make_perception(sim.station))
+    recorder = sim.recorder(10.0, 10.0)   # frames read from the diagram's ObjectSegmenter
     recorder.anchor()
     for _ in range(int(duration * 10) + 1):
         recorder.sample(0.0)
