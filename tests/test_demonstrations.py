@@ -115,6 +115,18 @@ def _write_arrays(path, arrays):
     (lambda a: a.update(skill=np.array("juggle")), "skill", "'juggle'; expected one of open, close, draw"),
     (lambda a: a.pop("X_WO_true"), "X_WO_true", "is missing"),
     (lambda a: a.pop("perception_valid"), "perception_valid", "is missing"),
+    # issue 12, group 3: the cloud size, degenerate clouds marked valid, X_OE vs X_OE_100hz
+    (lambda a: a.update(object_points=a["object_points"][:, :1000]), "object_points",
+     r"shape \(13, 1000, 3\).*expected \(13, 2048, 3\) float32"),
+    (lambda a: (a["object_points"].__setitem__(4, 0.0), a["perception_valid"].__setitem__(4, True)),
+     "object_points", r"frame 4 is marked valid but its cloud is degenerate .*mark it invalid"),
+    (lambda a: (a["object_points"].__setitem__((6, slice(None), slice(0, 2)), 0.3),
+                a["perception_valid"].__setitem__(6, True)),
+     "object_points", r"frame 6 is marked valid but its cloud is degenerate"),
+    (lambda a: a["X_OE"].__setitem__((5, 0), a["X_OE"][5, 0] + 0.01), "X_OE",
+     r"sample 5 \(0\.500 s\) differs from X_OE_100hz at the same instant \(position by 0\.01 m\)"),
+    (lambda a: a["times"].__setitem__(3, a["times"][3] + 0.004), "times",
+     r"sample 3 \(0\.304000 s\) is not one of the times_100hz instants"),
 ])
 def test_loader_names_file_and_field(tmp_path, mutate, field, message):
     arrays = make_demo().to_arrays()
@@ -207,3 +219,107 @@ def test_downsample_action_takes_every_tenth_and_the_last():
     assert idx.tolist() == [0, 10, 20, 30, 40, 50, 60, 70, 80, 90, 100, 105]
     np.testing.assert_array_equal(t10, t[idx])
     np.testing.assert_array_equal(X10[:, 0], t[idx])
+
+
+def test_degenerate_cloud_is_fine_when_marked_invalid(tmp_path):
+    demo = make_demo()
+    demo.object_points[4] = 0.0
+    demo.perception_valid[4] = False
+    save_demonstration(demo, tmp_path / "demo_000.npz")
+    assert not load_demonstration(tmp_path / "demo_000.npz").perception_valid[4]
+
+
+def test_quaternion_sign_of_x_oe_may_differ_from_the_raw_pose():
+    demo = make_demo()
+    demo.X_OE[3, 3:] *= -1.0  # q and -q are the same orientation
+    demo.validate()
+
+
+def test_demonstrations_too_short_for_the_goal_model_name_the_file(tmp_path):
+    from drake_skill.skill import SkillConfig, fit_skill
+
+    demos = [make_demo(0), make_demo(1)]
+    for i, d in enumerate(demos):
+        d.path = str(tmp_path / f"demo_{i:03d}.npz")
+    config = SkillConfig(skill="open")
+    config.pomrp.goal_model.n_states_min = 20
+    with pytest.raises(ValueError, match=r"demo_000\.npz: 13 frames at 10 Hz, fewer than the goal model's "
+                                         r"smallest state count \(pomrp\.goal_model\.n_states_min = 20\)"):
+        fit_skill(demos, config)
+    config = SkillConfig(skill="open")  # 20 DMP bases for 13 frames
+    with pytest.raises(ValueError, match=r"demo_000\.npz: 13 frames at 10 Hz, fewer than the 20 DMP bases"):
+        fit_skill(demos, config)
+
+
+# ------------------------------------------------------------- sets of demonstrations
+def test_set_is_written_as_one_unit_with_a_manifest(tmp_path):
+    from drake_skill.demos.format import MANIFEST, save_demonstrations
+
+    out = tmp_path / "open"
+    out.mkdir()
+    (out / "notes.txt").write_text("kept")
+    paths = save_demonstrations([make_demo(0), make_demo(1)], out)
+    assert [p.name for p in paths] == ["demo_000.npz", "demo_001.npz"]
+    assert json.loads((out / MANIFEST).read_text())["files"].keys() == {"demo_000.npz", "demo_001.npz"}
+    assert (out / "notes.txt").read_text() == "kept"
+    assert [d.seed for d in load_demonstrations(out)] == [0, 1]
+    with pytest.raises(FileExistsError, match=r"already holds 2 demonstration file\(s\) .*pass --force"):
+        save_demonstrations([make_demo(5)], out)
+    save_demonstrations([make_demo(5)], out, force=True)  # fewer than before: no stale demo_001
+    assert [d.seed for d in load_demonstrations(out)] == [5] and (out / "notes.txt").exists()
+    # A mixed folder is detected: a file of another recording dropped in.
+    save_demonstration(make_demo(9), out / "demo_001.npz")
+    with pytest.raises(DemonstrationError, match=r"do not match demos\.json .*not listed \['demo_001\.npz'\]"):
+        load_demonstrations(out)
+    (out / "demo_001.npz").unlink()
+    save_demonstration(make_demo(9), out / "demo_000.npz", force=True)
+    with pytest.raises(DemonstrationError, match=r"demo_000\.npz: contents differ from the checksum"):
+        load_demonstrations(out)
+    (out / "f").write_text("x")
+    with pytest.raises(NotADirectoryError, match="exists and is not a folder"):
+        save_demonstrations([make_demo(0)], out / "f")
+
+
+def test_interrupted_record_force_leaves_old_or_new(tmp_path, monkeypatch):
+    """An interruption at every file-system step of ``demos record --force``'s write
+    (save_demonstrations) leaves the old set or the new one."""
+    from drake_skill import fileio
+    from drake_skill.demos.format import save_demonstrations
+
+    class Interrupted(BaseException):
+        pass
+
+    old = [make_demo(0), make_demo(1), make_demo(2)]
+    new = [make_demo(10), make_demo(11)]
+    reference = tmp_path / "reference"
+    save_demonstrations(old, reference)
+    steps = ("atomic_write_bytes", "_fsync_tree", "_swap_in", "_remove_tree", "carry_over")
+    outcomes = []
+    for at in range(1, 30):
+        import shutil
+        target = tmp_path / f"case{at}"
+        shutil.copytree(reference, target)
+        state = {"n": 0, "fired": False}
+        with monkeypatch.context() as m:
+            for name in steps:
+                real = getattr(fileio, name)
+
+                def step(*args, _real=real, **kwargs):
+                    if state["fired"]:
+                        return None
+                    state["n"] += 1
+                    if state["n"] == at:
+                        state["fired"] = True
+                        raise Interrupted()
+                    return _real(*args, **kwargs)
+                m.setattr(fileio, name, step)
+            try:
+                save_demonstrations(new, target, force=True)
+            except Interrupted:
+                pass
+        seeds = [d.seed for d in load_demonstrations(target)]
+        assert seeds in ([0, 1, 2], [10, 11]), f"step {at}: {seeds}"
+        outcomes.append(seeds == [10, 11])
+        if not state["fired"]:
+            break
+    assert not state["fired"] and outcomes[-1] and not outcomes[0] and len(outcomes) >= 5
