@@ -35,9 +35,11 @@ Safety lives here, not in the caller's hands:
   :class:`StaleStatusError`: the check runs every ``STATUS_CHECK_PERIOD``
   (5 ms), and the command published at the instant it fires is the last.
 * The reflex: the driver reports the robot's own reflex (``robot_mode`` =
-  kReflex); the measured external joint torque is checked against the
-  station config's reflex limits by :func:`reflex_violation`, the function
-  that decides the reflex in simulation too.
+  kReflex), which stops the station; and :meth:`HardwareStation.robot_scene_contact`
+  gives the measured external joint torques (the driver's
+  ``joint_torque_external``) to the same check that decides the reflex in
+  simulation (the recorder's monitor in ``drake_skill.station.simulation``,
+  on the scenario's ``reflex`` limits).
 
 The station's simulator must run in real time (``realtime`` is True; the
 rollout runner paces its simulator by it). Time inside the diagram is the
@@ -93,9 +95,8 @@ class StaleStatusError(RuntimeError):
         self.last_seen, self.detected_at = last_seen, detected_at
 
 
-#: The reflex error of the simulated station, where it defines one.
-ReflexError = getattr(_simulation, "ReflexError", None) or type(
-    "ReflexError", (RuntimeError,), {"__doc__": "The collision reflex stopped the arm."})
+#: The collision reflex's error, the simulated station's.
+ReflexError = _simulation.ReflexError
 
 
 def wall_clock_utime() -> int:
@@ -106,28 +107,6 @@ def wall_clock_utime() -> int:
 def clip_to_workspace(p_WE, lower, upper) -> np.ndarray:
     """p_WE (3,) [m] clipped to the box [lower, upper] (world frame)."""
     return np.clip(np.asarray(p_WE, dtype=float), lower, upper)
-
-
-def reflex_limits(station_config) -> np.ndarray | None:
-    """(7,) external joint torque limits [N m] of the station config's reflex, or None."""
-    reflex = getattr(station_config, "reflex", None)
-    if reflex is None or not getattr(reflex, "enabled", True):
-        return None
-    limit = getattr(reflex, "external_torque_max", None)
-    return None if limit is None else np.asarray(limit, dtype=float)
-
-
-def reflex_violation(tau_external, limits) -> str | None:
-    """Why the reflex fires for external joint torques ``tau_external`` (7,) [N m]
-    against ``limits`` (7,) [N m], or None: |tau_i| > limit_i on any joint i."""
-    if limits is None:
-        return None
-    tau = np.asarray(tau_external, dtype=float)
-    over = np.flatnonzero(np.abs(tau) > limits)
-    if over.size == 0:
-        return None
-    i = int(over[np.argmax(np.abs(tau[over]) - limits[over])])
-    return f"external torque on joint {i + 1} is {tau[i]:.1f} N m (limit {limits[i]:.1f} N m)"
 
 
 # --------------------------------------------------------------------------- leaf systems
@@ -178,15 +157,17 @@ class StatusMonitor(LeafSystem):
     Discrete state [utime of the last new status, context time it was seen].
     Every ``period`` s: a status with a new ``utime`` refreshes the state; a
     status older than ``timeout`` s raises :class:`StaleStatusError`; a
-    status whose ``robot_mode`` is kReflex or kUserStopped, or an external
-    torque over the reflex limits (:func:`reflex_violation`), raises
-    :class:`ReflexError`. The error ends the simulator's step: no command
-    goes out after the instant of the check.
+    status whose ``robot_mode`` is kReflex or kUserStopped (the robot
+    stopped itself) raises :class:`ReflexError`. The error ends the
+    simulator's step: no command goes out after the instant of the check.
+    (The reflex limits on the external torque are checked where the
+    simulated station's are, by the recorder's monitor on
+    :meth:`HardwareStation.robot_scene_contact`.)
     """
 
-    def __init__(self, period: float, timeout: float, torque_limits=None, channel: str = "PANDA_STATUS"):
+    def __init__(self, period: float, timeout: float, channel: str = "PANDA_STATUS"):
         super().__init__()
-        self._timeout, self._limits, self._channel = float(timeout), torque_limits, channel
+        self._timeout, self._channel = float(timeout), channel
         self._status = self.DeclareAbstractInputPort("status", AbstractValue.Make(lcmt_panda_status()))
         self._tau = self.DeclareVectorInputPort("torque_external", N_JOINTS)
         self._state = self.DeclareDiscreteState(2)   # [last utime, time seen]
@@ -216,11 +197,8 @@ class StatusMonitor(LeafSystem):
                 "stopped commanding. Check that the driver runs, its --lcm_url and channels, and the network",
                 last_seen=seen, detected_at=t)
         if msg.num_joints and msg.robot_mode in (lcmt_panda_status.kReflex, lcmt_panda_status.kUserStopped):
-            what = "reflex" if msg.robot_mode == lcmt_panda_status.kReflex else "user stop"
-            raise ReflexError(f"the robot reports its {what} at t = {t:.3f} s: stopped commanding")
-        why = reflex_violation(self._tau.Eval(context), self._limits)
-        if why is not None:
-            raise ReflexError(f"reflex at t = {t:.3f} s: {why}")
+            what = "robot reflex" if msg.robot_mode == lcmt_panda_status.kReflex else "robot user stop"
+            raise ReflexError(t, 0.0, self._tau.Eval(context), what)
 
 
 class ForwardKinematics(LeafSystem):
@@ -423,7 +401,7 @@ class HardwareStation(Diagram):
         self._status_py = builder.AddNamedSystem("status_monitor_subscriber", LcmSubscriberSystem.Make(
             config.status_channel, lcmt_panda_status, self.lcm))
         self.monitor = builder.AddNamedSystem("status_monitor", StatusMonitor(
-            STATUS_CHECK_PERIOD, config.status_timeout, reflex_limits(self.config), config.status_channel))
+            STATUS_CHECK_PERIOD, config.status_timeout, config.status_channel))
         builder.Connect(self._status_py.get_output_port(), self.monitor.GetInputPort("status"))
         builder.Connect(receiver.get_torque_external_output_port(), self.monitor.GetInputPort("torque_external"))
         state = builder.AddNamedSystem("panda_state", Multiplexer([N_JOINTS, N_JOINTS]))

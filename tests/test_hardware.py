@@ -1,0 +1,301 @@
+"""The hardware port against a simulated robot that speaks the Panda driver's LCM protocol.
+
+Everything runs in this process over ``memq://`` (one DrakeLcm, which the
+hardware station handles; the simulated robot runs on its own simulator in a
+background thread, in real time), except the last test, which runs the robot
+in a second process inside a network namespace of its own.
+"""
+
+import copy
+import shutil
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+from drake import lcmt_panda_command, lcmt_panda_status
+from pydrake.common.eigen_geometry import Quaternion
+from pydrake.lcm import DrakeLcm
+from pydrake.math import RigidTransform
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_skill.action.dmp import DmpConfig, fit_dmp
+from drake_skill.action.quaternion import make_quaternions_continuous
+from drake_skill.demos.format import downsample_action
+from drake_skill.learning.rollout import ActionModel, RolloutConfig, RolloutRunner
+from drake_skill.station import limits
+from drake_skill.station.builder import build_station
+from drake_skill.station.config import scenario_for_skill
+from drake_skill.station.hardware import (STATUS_CHECK_PERIOD, ReflexError, StaleStatusError, StatusMonitor,
+                                          build_hardware_station)
+from drake_skill.station.hardware_config import HardwareConfig, load_hardware_config
+from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource
+from drake_skill.station.scripted import scripted_plan
+from drake_skill.station.sim_robot import DriverProtocolError, SimRobot
+from drake_skill.station.simulation import StationSimulation, pose_to_vector
+
+#: Ports the physics issue adds to the simulated station (the hardware one has them already).
+PHYSICS_PORTS = {"external_torque", "joint_acceleration_commanded"}
+
+
+def _scenario(skill="draw", camera=False):
+    config = scenario_for_skill(skill)
+    config.enable_camera = camera
+    return config
+
+
+def _hardware_config(station_config):
+    config = HardwareConfig(lcm_url="memq://")
+    config.station = station_config
+    return config
+
+
+def _port_signature(port):
+    kind = port.get_data_type().name
+    if kind == "kAbstractValued":
+        return kind, type(port.Allocate().get_value()).__name__
+    return kind, port.size()
+
+
+def _ports(system):
+    ins = {system.get_input_port(i).get_name(): _port_signature(system.get_input_port(i))
+           for i in range(system.num_input_ports())}
+    outs = {system.get_output_port(i).get_name(): _port_signature(system.get_output_port(i))
+            for i in range(system.num_output_ports())}
+    return ins, outs
+
+
+@pytest.mark.parametrize("camera", [False, True])
+def test_ports_match_the_simulated_station(camera):
+    station_config = _scenario("open", camera)
+    sim_in, sim_out = _ports(build_station(station_config))
+    hw_in, hw_out = _ports(build_hardware_station(_hardware_config(station_config), lcm=DrakeLcm("memq://")))
+    assert hw_in == sim_in
+    for name, signature in sim_out.items():
+        assert hw_out.get(name) == signature, f"output {name}: hardware {hw_out.get(name)}, simulated {signature}"
+    assert set(hw_out) - set(sim_out) <= PHYSICS_PORTS
+    if camera:
+        assert {"point_cloud", "color_image", "depth_image", "label_image"} <= set(hw_out)
+
+
+# --------------------------------------------------------------------------- greedy policy
+@pytest.fixture(scope="module")
+def draw_skill():
+    """A DMP fitted to a scripted Draw recorded in the simulated station (seed 5)."""
+    config = _scenario("draw")
+    recording = copy.deepcopy(config)
+    recording.reflex.enabled = False    # the demonstration's contact forces are not under test here
+    sim = StationSimulation(recording)
+    X_WO = sim.reset(5)
+    plan = scripted_plan("draw", X_WO, sim.home_pose())
+    log = sim.run(plan, plan.duration, record_hz=100)
+    X_OW = X_WO.inverse()
+    poses = np.array([pose_to_vector(X_OW @ RigidTransform(Quaternion(p[3:] / np.linalg.norm(p[3:])), p[:3]))
+                      for p in log.ee_pose])
+    poses[:, 3:] = make_quaternions_continuous(poses[:, 3:])
+    _, times, poses = downsample_action(log.times, poses, rate_hz=10)
+    dmp_config = DmpConfig(n_basis=30)
+    return ActionModel("draw", fit_dmp(times, poses, dmp_config), dmp_config), config
+
+
+def test_greedy_policy_on_the_simulated_robot_matches_direct_simulation(draw_skill):
+    model, config = draw_skill
+    rollout = RolloutConfig(object_pose="ground_truth", goal_model=False, record_hz=10)
+    direct = RolloutRunner(model, config, rollout).run(model.initial_dmp.weights, seed=5)
+    assert not direct.failed, direct.message
+
+    lcm = DrakeLcm("memq://")
+    hardware_config = _hardware_config(config)
+    robot = SimRobot(hardware_config, lcm=lcm, pump=False)
+    runner = RolloutRunner(model, config=rollout, station=build_hardware_station(hardware_config, lcm=lcm))
+    robot.start(seed=5)
+    try:
+        on_robot = runner.run(model.initial_dmp.weights, seed=5)
+    finally:
+        robot.stop()
+    assert not on_robot.failed, on_robot.message
+    # The simulated robot's ground truth gives the direct simulation's verdict.
+    assert robot.judge("draw") == direct.success
+    assert abs(robot.object_state() - direct.final_object_state) < 0.01
+    assert abs(on_robot.final_object_state - robot.object_state()) < 1e-3   # over the ground-truth channel
+    # The hand path (measured through the driver's status) within 5 mm median, 2 cm at worst.
+    n = min(len(direct.ee_pose), len(on_robot.ee_pose))
+    assert n >= int(runner.duration() * 10)
+    error = np.linalg.norm(on_robot.ee_pose[:n, :3] - direct.ee_pose[:n, :3], axis=1)
+    assert np.median(error) < 0.005 and error.max() < 0.02, (np.median(error), error.max())
+    travel = np.sum(np.linalg.norm(np.diff(direct.ee_pose[:, :3], axis=0), axis=1))
+    assert travel > 0.1, "the skill's hand path is too short to say anything"
+    accepted, dropped = robot.command_counts()
+    assert accepted > 100 and dropped == 0, "the driver would have dropped commands (utime not wall-clock?)"
+
+
+# --------------------------------------------------------------------------- safety
+def _harness(hardware_config, lcm):
+    builder = DiagramBuilder()
+    station = builder.AddSystem(build_hardware_station(hardware_config, lcm=lcm))
+    source = builder.AddSystem(PoseTrajectorySource())
+    builder.Connect(source.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
+    builder.Connect(source.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    simulator = Simulator(diagram, context)
+    simulator.set_target_realtime_rate(1.0)
+    return station, source, context, simulator
+
+
+def test_jump_is_rate_limited_clipped_and_stale_status_stops_the_station():
+    hardware_config = _hardware_config(_scenario("draw"))
+    lcm = DrakeLcm("memq://")
+    robot = SimRobot(hardware_config, lcm=lcm, pump=False)
+    station, source, context, simulator = _harness(hardware_config, lcm)
+    commands = []
+    lcm.Subscribe(hardware_config.command_channel, lambda data: commands.append(lcmt_panda_command.decode(data)))
+    y_max = hardware_config.workspace.upper[1]
+    robot.start()
+    try:
+        station.reset(context)
+        station_context = station.GetMyContextFromRoot(context)
+        X0 = station.GetOutputPort("ee_pose").Eval(station_context)
+        q0 = station.GetOutputPort("panda_state").Eval(station_context)[:7].copy()
+        # Hold, then jump 0.5 m sideways: past the workspace's y = 0.45 m.
+        target = RigidTransform(X0.rotation(), X0.translation() + [0.0, 0.5, 0.0])
+        assert target.translation()[1] > y_max + 0.03
+        source.set_plan(source.GetMyMutableContextFromRoot(context),
+                        PosePlan.from_poses([0.0, 0.3, 0.31], [X0, X0, target], [0.0] * 3))
+        simulator.Initialize()
+        simulator.AdvanceTo(2.5)
+        p = station.GetOutputPort("ee_pose").Eval(station_context).translation()
+        robot.stop()                              # the robot's status stops
+        with pytest.raises(StaleStatusError, match="no status from the robot") as stale:
+            simulator.AdvanceTo(4.0)
+    finally:
+        robot.stop()
+    for _ in range(20):
+        lcm.HandleSubscriptions(1)                # what is still queued
+    period = hardware_config.command_period
+
+    # The first command is the measured position.
+    q = np.array([c.joint_position for c in commands])
+    assert np.max(np.abs(q[0] - q0)) < 1e-9
+    # On the wire: joint velocity, acceleration and jerk within Franka's limits.
+    v = np.diff(q, axis=0) / period
+    a = np.diff(v, axis=0) / period
+    j = np.diff(a, axis=0) / period
+    assert np.max(np.abs(v) / limits.QD_MAX) <= 1 + 1e-6
+    assert np.max(np.abs(a) / limits.QDD_MAX) <= 1 + 1e-6
+    assert np.max(np.abs(j) / limits.QDDD_MAX) <= 1 + 1e-6
+    assert np.max(np.abs(a) / limits.QDD_MAX) > 0.5, "the jump did not exercise the limits"
+    # The out-of-workspace command is clipped: the hand went to y = 0.45 m, no further.
+    assert abs(p[1] - y_max) < 0.01 and p[1] < y_max + 0.002, p
+    # Stale status: caught within the configured time, commanding stopped there.
+    error = stale.value
+    age = error.detected_at - error.last_seen
+    assert hardware_config.status_timeout < age <= hardware_config.status_timeout + STATUS_CHECK_PERIOD + 1e-9
+    last_command_time = (len(commands) - 1) * period
+    assert error.last_seen + hardware_config.status_timeout - period <= last_command_time
+    assert last_command_time <= error.detected_at + 1e-9
+    assert all(c.utime > 1e15 for c in commands[:: max(1, len(commands) // 20)])   # wall clock [us]
+
+
+def test_reset_without_a_robot_says_what_to_check():
+    hardware_config = _hardware_config(_scenario("open"))
+    hardware_config.reset_timeout = 0.2
+    station = build_hardware_station(hardware_config, lcm=DrakeLcm("memq://"))
+    with pytest.raises(StaleStatusError, match="no robot status within 0.2 s.*driver"):
+        station.reset(station.CreateDefaultContext(), 0)
+
+
+def _status(robot_mode=lcmt_panda_status.kMove, utime=1):
+    msg = lcmt_panda_status()
+    msg.utime, msg.num_joints, msg.robot_mode = utime, 7, robot_mode
+    for name in ("joint_position", "joint_position_desired", "joint_velocity", "joint_velocity_desired",
+                 "joint_acceleration_desired", "joint_torque", "joint_torque_desired", "joint_torque_external"):
+        setattr(msg, name, [0.0] * 7)
+    return msg
+
+
+@pytest.mark.parametrize("mode", [lcmt_panda_status.kReflex, lcmt_panda_status.kUserStopped])
+def test_the_robots_own_reflex_stops_the_station(mode):
+    monitor = StatusMonitor(0.005, 0.1)
+    context = monitor.CreateDefaultContext()
+    monitor.GetInputPort("status").FixValue(context, _status(mode))
+    monitor.GetInputPort("torque_external").FixValue(context, np.zeros(7))
+    with pytest.raises(ReflexError, match="robot reflex" if mode == lcmt_panda_status.kReflex else "user stop"):
+        Simulator(monitor, context).AdvanceTo(0.02)
+
+
+def test_measured_external_torque_goes_to_the_shared_reflex_check():
+    """The recorder's reflex monitor (drake_skill.station.simulation) reads
+    ``robot_scene_contact``; on the robot that is the driver's external torque."""
+    hardware_config = _hardware_config(_scenario("open"))
+    lcm = DrakeLcm("memq://")
+    station = build_hardware_station(hardware_config, lcm=lcm)
+    context = station.CreateDefaultContext()
+    msg = _status()
+    msg.joint_position = list(hardware_config.station.q_home)
+    msg.joint_torque_external = [0.0, 0.0, 0.0, 41.0, 0.0, 0.0, -3.0]
+    lcm.Publish(hardware_config.status_channel, msg.encode())
+    station.reset(context, 0)
+    force, tau = station.robot_scene_contact(context)
+    assert force == 0.0 and np.array_equal(tau, msg.joint_torque_external)
+    np.testing.assert_allclose(station.GetOutputPort("panda_state").Eval(context)[:7], hardware_config.station.q_home)
+
+
+def test_camera_over_lcm_gives_the_object_pose():
+    from drake_skill.perception.systems import add_object_segmenter
+
+    hardware_config = _hardware_config(_scenario("draw", camera=True))
+    lcm = DrakeLcm("memq://")
+    robot = SimRobot(hardware_config, lcm=lcm, pump=False)
+    builder = DiagramBuilder()
+    station = builder.AddSystem(build_hardware_station(hardware_config, lcm=lcm))
+    segmenter = add_object_segmenter(builder, station)
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    robot.start(seed=3)
+    try:
+        station.reset(context, 3)                 # waits for a status and a camera frame
+    finally:
+        robot.stop()
+    cloud = station.GetOutputPort("point_cloud").Eval(station.GetMyContextFromRoot(context)).xyzs()
+    assert np.isfinite(cloud).all(axis=0).sum() > 100_000
+    seg_context = segmenter.GetMyContextFromRoot(context)
+    assert segmenter.get_valid_output_port().Eval(seg_context)[0] == 1.0
+    X_WO = segmenter.get_X_WO_output_port().Eval(seg_context)
+    assert np.linalg.norm(X_WO.translation() - robot.X_WO.translation()) < 0.01
+
+
+def test_simulated_driver_drops_old_commands_and_refuses_wrong_modes():
+    hardware_config = HardwareConfig(lcm_url="memq://")
+    hardware_config.station = _scenario("open")
+    robot = SimRobot(hardware_config)            # its own memq:// DrakeLcm, handled by its own thread
+    robot.start()
+
+    def command(utime, mode=lcmt_panda_status.CONTROL_MODE_POSITION):
+        msg = lcmt_panda_command()
+        msg.utime, msg.control_mode_expected = utime, mode
+        msg.num_joint_position, msg.joint_position = 7, list(hardware_config.station.q_home)
+        robot.lcm.Publish(hardware_config.command_channel, msg.encode())
+        time.sleep(0.1)
+
+    command(int(time.time() * 1e6) - 1_000_000)  # 1 s old: dropped
+    command(int(time.time() * 1e6))              # accepted
+    command(int(time.time() * 1e6), lcmt_panda_status.CONTROL_MODE_VELOCITY)
+    time.sleep(0.1)
+    with pytest.raises(DriverProtocolError, match="position mode"):
+        robot.stop()
+    assert robot.command_counts() == (1, 1)
+
+
+def test_hardware_config_errors_name_the_field():
+    with pytest.raises(ValueError, match="status_timeout"):
+        load_hardware_config(data="status_timeout: 0.0")
+    with pytest.raises(ValueError, match="workspace"):
+        load_hardware_config(data="workspace: {lower: [0, 0, 0], upper: [1, -1, 1]}")
+    with pytest.raises(ValueError, match="status_chanel"):
+        load_hardware_config(data="status_chanel: X")
+    config = load_hardware_config(data="lcm_url: memq://\ncommand_channel: FRANKA_CMD")
+    assert config.command_channel == "FRANKA_CMD" and config.status_channel == "PANDA_STATUS"
