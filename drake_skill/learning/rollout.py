@@ -69,8 +69,9 @@ __all__ = ["FAILURE_REASONS", "ActionModel", "ObjectPoseSource", "RolloutConfig"
 #: Why a rollout failed: simulation diverged; the SAP contact solver did not
 #: converge; the station's reflex stopped the arm (excessive contact force);
 #: the segmenter did not see the object on the first frame; a non-finite
-#: value (trajectory, goal data, return); any other exception.
-FAILURE_REASONS = ("diverged", "solver", "reflex", "perception", "non_finite", "error")
+#: value (trajectory, goal data, return); the DMP path leaves the workspace
+#: (checked before simulating); any other exception.
+FAILURE_REASONS = ("diverged", "solver", "reflex", "perception", "non_finite", "workspace", "error")
 
 # The station's failures carry their reason (ReflexError.reason = "reflex",
 # SolverError.reason = "solver", DivergedError.reason = "diverged"); the
@@ -89,6 +90,14 @@ class _PerceptionError(RuntimeError):
 
 class _NonFiniteError(RuntimeError):
     """A trajectory, goal frame or return is not finite."""
+
+    reason = "non_finite"
+
+
+class _WorkspaceError(RuntimeError):
+    """The DMP path goes farther from the object than ``workspace_radius``."""
+
+    reason = "workspace"
 
 
 def classify_failure(error: BaseException) -> str:
@@ -126,12 +135,18 @@ class RolloutConfig:
     goal_model: build the goal pipeline (segmenter -> PCAE -> POMRP reward);
       needs the station's camera. Off, rewards are zero (ground-truth
       success only, e.g. for plain imitation checks without a camera).
+    workspace_radius: a rollout whose DMP path (hand positions in the object
+      frame) goes farther than this from the object's origin fails with
+      reason "workspace" before it is simulated [m]. The Panda reaches
+      0.855 m; a path metres away is a runaway sample, and commanding it
+      would overflow differential IK's program.
     """
 
     object_pose: str = "perceived"
     settle_time: float = -1.0
     record_hz: float = 10.0
     goal_model: bool = True
+    workspace_radius: float = 3.0
 
     def validate(self) -> "RolloutConfig":
         """Raises ValueError naming the field that cannot work; returns self."""
@@ -141,6 +156,9 @@ class RolloutConfig:
         if not math.isfinite(self.settle_time):
             raise ValueError(f"rollout config field 'settle_time' = {self.settle_time!r}: expected a "
                              "duration >= 0 s, or < 0 for the station's success.settle_time")
+        if not (math.isfinite(self.workspace_radius) and self.workspace_radius > 0):
+            raise ValueError(f"rollout config field 'workspace_radius' = {self.workspace_radius!r}: "
+                             "expected > 0 m")
         if not (math.isfinite(self.record_hz) and self.record_hz > 0):
             raise ValueError(f"rollout config field 'record_hz' = {self.record_hz!r}: expected > 0 Hz")
         return self
@@ -396,6 +414,11 @@ class RolloutRunner:
         poses = integrate(dmp, self.dmp_config, default_times(dmp.tau, self.dmp_config.dt))
         if not np.all(np.isfinite(poses)):
             raise _NonFiniteError("the DMP trajectory of these weights is not finite")
+        with np.errstate(over="ignore", invalid="ignore"):
+            reach = float(np.max(np.linalg.norm(poses[:, :3], axis=1)))
+        if reach > self.rollout_config.workspace_radius:
+            raise _WorkspaceError(f"the DMP path goes {reach:.3g} m from the object (workspace_radius = "
+                                  f"{self.rollout_config.workspace_radius} m)")
 
     # -------------------------------------------------------------------- run
     def run(self, weights, seed: int) -> RolloutResult:
@@ -462,7 +485,8 @@ class RolloutRunner:
                 result.dense_return = float(total)
                 result.filtered_rewards = np.asarray(pomrp.filtered_rewards(G), dtype=float)
                 result.verdict = bool(pomrp.verdict(G))
-        values = [result.dense_return, final]
+        # A station without ground truth (the robot) reports a NaN object state.
+        values = [result.dense_return] + ([final] if getattr(self.station, "has_ground_truth", True) else [])
         if not (np.all(np.isfinite(values)) and np.all(np.isfinite(result.rewards))
                 and np.all(np.isfinite(result.filtered_rewards)) and np.all(np.isfinite(poses))):
             raise _NonFiniteError("the rollout's return, rewards or hand path are not finite")

@@ -23,6 +23,10 @@ the process pool and on Ray, whichever worker runs which rollout.
 - :class:`RayPool`: one Ray actor per worker (``pip install ray``): an
   existing cluster (``ray_address``) or a local ``ray.init()``.
 
+The worker processes are started with ``spawn``, which imports the main
+module again in each worker: a script that makes a :class:`ProcessPool`
+must guard its entry point with ``if __name__ == "__main__":``.
+
 Messages between processes use multiprocessing's (or Ray's) own pickling
 of this package's plain dataclasses and numpy arrays, between processes of
 one run; nothing read from disk is unpickled.
