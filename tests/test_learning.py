@@ -1,0 +1,86 @@
+"""The learning run: rewards per method, seeds, configuration, and checkpoint/resume."""
+
+import json
+import types
+
+import numpy as np
+import pytest
+
+from drake_skill.learning.loop import LearnConfig, episode_rewards, learn, pose_seed
+from drake_skill.skill import Skill
+
+from learning_support import rollout_config, shared_skill
+
+
+def _result(failed=False, dense=0.0, filtered=(), verdict=False):
+    return types.SimpleNamespace(failed=failed, dense_return=dense, filtered_rewards=np.array(filtered, float),
+                                 verdict=verdict)
+
+
+def test_episode_rewards_for_black_box_and_per_step_methods():
+    results = [_result(dense=120.0, filtered=[1, 2, 3], verdict=True),
+               _result(failed=True, dense=55.0, filtered=[5, 5], verdict=True),   # failed: counts 0
+               _result(dense=64.0, filtered=[4, 4])]
+    np.testing.assert_array_equal(episode_rewards(results, "dense", False), [120.0, 0.0, 64.0])
+    np.testing.assert_array_equal(episode_rewards(results, "sparse", False), [1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(episode_rewards(results, "dense", True),
+                                  [[1, 2, 3], [0, 0, 0], [4, 4, 0]])     # zero-padded to the longest
+    np.testing.assert_array_equal(episode_rewards(results, "sparse", True), [[0, 0, 1], [0, 0, 0], [0, 0, 0]])
+
+
+def test_pose_seeds_are_fixed_and_distinct():
+    seeds = {pose_seed(0, e, c) for e in range(1, 6) for c in range(6)} | {pose_seed(0, e) for e in range(6)}
+    assert len(seeds) == 36 and all(0 <= s < 2 ** 31 for s in seeds)
+    assert pose_seed(3, 2, 1) == pose_seed(3, 2, 1) != pose_seed(4, 2, 1)
+
+
+def test_learn_config_errors_name_the_field():
+    for changes, field in (({"method": "sgd"}, "method"), ({"reward": "shaped"}, "reward"),
+                           ({"episodes": 0}, "episodes"), ({"method": "power", "weighting": "range"}, "weighting"),
+                           ({"method": "cma-es", "rollouts": 1}, "rollouts"), ({"held_out": -1}, "held_out")):
+        with pytest.raises(ValueError, match=field):
+            LearnConfig(**changes).validate()
+    assert LearnConfig().search_options() == {"n_episodes": 5, "seed": 0}
+
+
+def _numbers(records):
+    """The records without wall-clock times."""
+    def strip(r):
+        return {k: v for k, v in r.items() if k not in ("wall_s",)}
+    return [strip(r) for r in records]
+
+
+def test_resume_after_an_interruption_reproduces_the_uninterrupted_run(tmp_path_factory, tmp_path):
+    shared = shared_skill(tmp_path_factory)
+    config = LearnConfig(episodes=2, rollouts=2, held_out=1, seed=3)
+    kwargs = dict(station_config=shared["station"], rollout_config=rollout_config(), replay=False,
+                  progress=False)
+    whole = learn(shared["skill_dir"], tmp_path / "whole", config, **kwargs)
+    assert whole.complete and whole.search.episode == 2
+
+    part = learn(shared["skill_dir"], tmp_path / "part", config, stop_after=1, **kwargs)
+    assert not part.complete and part.search.episode == 1
+    state = json.loads((tmp_path / "part" / "checkpoint" / "state.json").read_text())
+    assert state["episode"] == 1 and not (tmp_path / "part" / "summary.json").exists()
+    with pytest.raises(FileExistsError, match="--resume"):
+        learn(shared["skill_dir"], tmp_path / "part", config, **kwargs)
+    with pytest.raises(ValueError, match="learn"):           # other settings: refused
+        learn(shared["skill_dir"], tmp_path / "part", LearnConfig(episodes=2, rollouts=2, held_out=1, seed=4),
+              resume=True, **kwargs)
+    resumed = learn(shared["skill_dir"], tmp_path / "part", config, resume=True, **kwargs)
+    assert resumed.complete
+
+    np.testing.assert_array_equal(resumed.search.mean, whole.search.mean)
+    np.testing.assert_array_equal(resumed.search.covariances, whole.search.covariances)
+    lines = {name: [json.loads(line) for line in (tmp_path / name / "results.jsonl").read_text().splitlines()]
+             for name in ("whole", "part")}
+    assert _numbers(lines["part"]) == _numbers(lines["whole"])
+    kinds = [r["type"] for r in lines["whole"]]
+    assert kinds.count("rollout") == 4 and kinds.count("greedy") == 3 and kinds.count("held_out") == 2
+    assert resumed.summary["curve"] == whole.summary["curve"]
+    # The learned skill holds the final mean and loads back.
+    learned = Skill.load(tmp_path / "part" / "skill")
+    np.testing.assert_array_equal(learned.initial_weights, whole.search.mean)
+    assert learned.info["learning"]["method"] == "pi2-es-cov"
+    # The search moved: the learned weights are not the initial ones.
+    assert not np.array_equal(learned.initial_weights, Skill.load(shared["skill_dir"]).initial_weights)
