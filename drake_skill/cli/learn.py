@@ -191,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def main(argv=None) -> int:
-    """Stand-alone entry (the dispatcher normally calls add_arguments / run)."""
-    parser = argparse.ArgumentParser(prog="drake-skill learn")
-    add_arguments(parser)
-    return run(parser.parse_args(argv))
+    """``drake-skill learn ARGV...`` (scripts and tests): errors as one line, exit status 2."""
+    from drake_skill.cli.main import command_main
+
+    return command_main(NAME, argv)

@@ -1,0 +1,73 @@
+"""``drake-skill learn`` end to end (1 episode x 2 rollouts) and ``drake-skill evaluate``."""
+
+import json
+
+import numpy as np
+import pytest
+
+from drake_skill.cli.main import main
+from drake_skill.learning.loop import ARTIFACTS
+from drake_skill.skill import Skill
+
+from learning_support import shared_skill
+
+
+@pytest.fixture(scope="module")
+def learned(tmp_path_factory):
+    shared = shared_skill(tmp_path_factory)
+    out = tmp_path_factory.mktemp("learn_cli") / "run"
+    argv = ["learn", "--skill-dir", str(shared["skill_dir"]), "--station-config", str(shared["station_yaml"]),
+            "--episodes", "1", "--rollouts", "2", "--held-out", "1", "--seed", "5", "--out", str(out), "--quiet"]
+    assert main(argv) == 0
+    return shared, out, argv
+
+
+def test_learn_writes_every_artifact(learned, capsys):
+    shared, out, _ = learned
+    for name in ARTIFACTS:
+        assert (out / name.rstrip("/")).exists(), f"{name} missing"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["method"] == "pi2-es-cov" and summary["reward"] == "dense" and summary["weighting"] == "thesis"
+    assert [c["episode"] for c in summary["curve"]] == [0, 1]
+    assert summary["n_rollouts"] == 2 and 0.0 <= summary["held_out_after"] <= 1.0
+    records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
+    assert [r["type"] for r in records] == ["held_out", "greedy", "rollout", "rollout", "greedy", "episode",
+                                           "held_out"]
+    for r in records:
+        if r["type"] == "rollout":
+            assert set(r) >= {"seed", "failed", "reason", "dense_return", "verdict", "success", "wall_s",
+                              "ik_warnings", "reward"}
+            assert r["reward"] == (0.0 if r["failed"] else r["dense_return"])
+    assert (out / "learning_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for name in ("replay_first.html", "replay_last.html"):
+        html = (out / name).read_text()
+        assert html.lstrip().lower().startswith("<!doctype html") or "<html" in html[:500].lower()
+        assert "animation" in html.lower()
+    learned_skill = Skill.load(out / "skill")
+    assert learned_skill.info["learning"]["episodes"] == 1
+    assert not np.array_equal(learned_skill.initial_weights, Skill.load(shared["skill_dir"]).initial_weights)
+
+
+def test_learn_refuses_to_overwrite_and_to_resume_nothing(learned, tmp_path, capsys):
+    _, out, argv = learned
+    assert main(argv) == 2
+    assert "--resume" in capsys.readouterr().err
+    empty = tmp_path / "empty"
+    assert main([*argv[:-3], "--out", str(empty), "--resume", "--quiet"]) == 2
+    assert "no checkpoint" in capsys.readouterr().err
+    assert main(["learn", "--episodes", "0", "--out", str(tmp_path / "x")]) == 2
+    assert "--episodes" in capsys.readouterr().err
+
+
+def test_evaluate_the_learned_skill(learned, capsys):
+    shared, out, _ = learned
+    capsys.readouterr()
+    assert main(["evaluate", "--skill", str(out / "skill"), "--station-config", str(shared["station_yaml"]),
+                 "--poses", "1", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report["learned"] and report["seeds"] == [900000]
+    assert report == json.loads((out / "skill" / "evaluation.json").read_text())
+    # The held-out pose of learn's final evaluation is the same pose: the same verdict.
+    held = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()][-1]
+    policy = report["policies"][str(report["initial_index"])]
+    assert policy["successes"] == held["successes"] and policy["returns"] == held["returns"]
