@@ -3,23 +3,19 @@
 
     python tools/imitation_success.py SKILL_DIR [--poses 20] [--seed0 1000] [--perceived] [--all-demos]
 
-Executes the skill's initial policy (the DMP of the demonstration chosen by
-the skill's seed; ``--all-demos``: each demonstration's DMP) in the simulated
-station on ``--poses`` object poses drawn from seeds ``seed0, seed0 + 1, ...``
-(none of them a demonstration's), judges each from the simulator's ground
-truth and prints the success rate. The object frame comes from the
-simulator's ground truth, or with ``--perceived`` from the segmenter's estimate
-on the camera's first frame (slower: the camera renders every frame).
-Writes ``imitation.json`` into SKILL_DIR.
+A thin wrapper over ``drake-skill evaluate`` (``drake_skill.learning.loop.evaluate_skill``):
+executes the skill's initial policy (``--all-demos``: each demonstration's
+DMP) on ``--poses`` object poses from seeds ``seed0, seed0 + 1, ...``, judged
+from the simulator's ground truth. The object frame is the ground truth, or
+with ``--perceived`` the segmenter's estimate on the camera's first frame.
+Writes ``imitation.json`` into SKILL_DIR. Equivalent to::
+
+    drake-skill evaluate --skill SKILL_DIR --poses 20 --seed0 1000 --ground-truth-pose --out SKILL_DIR/imitation.json
 """
 
 import argparse
-import json
 import sys
-import time
 from pathlib import Path
-
-import numpy as np
 
 
 def main(argv=None) -> int:
@@ -29,40 +25,18 @@ def main(argv=None) -> int:
     parser.add_argument("--seed0", type=int, default=1000)
     parser.add_argument("--perceived", action="store_true")
     parser.add_argument("--all-demos", action="store_true")
+    parser.add_argument("--workers", type=int, default=1)
     args = parser.parse_args(argv)
 
-    from tqdm import tqdm
+    from drake_skill.cli.main import command_main
 
-    from drake_skill.fileio import atomic_write_json
-    from drake_skill.learning.rollout import RolloutRunner
-    from drake_skill.skill import Skill
-    from drake_skill.station.config import scenario_for_skill
-
-    skill = Skill.load(args.skill_dir)
-    config = scenario_for_skill(skill.name)
-    config.enable_camera = args.perceived
-    runner = RolloutRunner(config, skill.initial_dmp, skill.config.dmp, skill=skill.name,
-                           object_pose="perceived" if args.perceived else "ground_truth")
-    indices = range(len(skill.dmps)) if args.all_demos else [skill.initial_index]
-    report = {"skill": skill.name, "object_pose": "perceived" if args.perceived else "ground_truth",
-              "seeds": [args.seed0 + i for i in range(args.poses)], "policies": {}}
-    start = time.perf_counter()
-    for index in indices:
-        finals, successes = [], []
-        for seed in tqdm(report["seeds"], desc=f"DMP of demonstration {index}", unit="rollout"):
-            result = runner.run(skill.dmps[index].weights, seed)
-            finals.append(result.final_object_state)
-            successes.append(result.success)
-        report["policies"][str(index)] = {"success_rate": float(np.mean(successes)),
-                                          "final_object_state": finals,
-                                          "initial": index == skill.initial_index}
-        print(f"demonstration {index}{' (initial policy)' if index == skill.initial_index else ''}: "
-              f"success {np.mean(successes) * 100:.0f} % over {args.poses} poses; final object state "
-              f"median {np.median(finals):.2f}, range {min(finals):.2f}..{max(finals):.2f}")
-    report["wall_s"] = round(time.perf_counter() - start, 1)
-    atomic_write_json(args.skill_dir / "imitation.json", report)
-    print(f"wrote {args.skill_dir / 'imitation.json'}")
-    return 0
+    argv = ["--skill", str(args.skill_dir), "--poses", str(args.poses), "--seed0", str(args.seed0),
+            "--workers", str(args.workers), "--out", str(args.skill_dir / "imitation.json")]
+    if not args.perceived:
+        argv.append("--ground-truth-pose")
+    if args.all_demos:
+        argv.append("--all-demos")
+    return command_main("evaluate", argv)
 
 
 if __name__ == "__main__":

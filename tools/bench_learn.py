@@ -1,0 +1,8 @@
+#!/usr/bin/env python3
+"""Learning-run wall time with 1 and 2 workers; see drake_skill/bench/learn.py."""
+import sys
+
+from drake_skill.bench.learn import main
+
+if __name__ == "__main__":
+    sys.exit(main())
