@@ -59,7 +59,9 @@ class Rig:
                 s.get_object_points_output_port().Eval(c).copy(), s.get_bounding_box_output_port().Eval(c).copy())
 
     def object_mask(self):
-        labels = self.station.GetOutputPort("label_image").Eval(self.station.GetMyContextFromRoot(self.context))
+        """The object's pixels in the label image of the camera the segmenter reads (the
+        object camera's crop)."""
+        labels = self.station.GetOutputPort("object_label_image").Eval(self.station.GetMyContextFromRoot(self.context))
         return np.isin(labels.data[:, :, 0], self.object_labels)
 
 
@@ -74,12 +76,14 @@ def close_rig():
 
 def test_outputs_match_truth_and_label_image(close_rig):
     rig = close_rig
+    assert (rig.segmenter.config.image_height, rig.segmenter.config.image_width) == rig.station.object_camera.window.shape
     for seed in (0, 5):
         X_true = rig.reset(seed)
         valid, X_WO, points, box = rig.outputs()
         assert valid
-        assert np.linalg.norm(X_WO.translation() - X_true.translation()) < 0.01
-        assert math.degrees(abs(_yaw(X_WO) - _yaw(X_true))) < 2.0
+        # Measured: 1.4-1.6 mm and at most 0.11 degrees (lid open, seeds 0-5).
+        assert np.linalg.norm(X_WO.translation() - X_true.translation()) < 0.002
+        assert math.degrees(abs(_yaw(X_WO) - _yaw(X_true))) < 0.2
         assert points.shape == (2048, 3) and points.dtype == np.float64
         # Every point inside the reported box (its own yawed frame).
         c, s = math.cos(box[6]), math.sin(box[6])
@@ -89,7 +93,7 @@ def test_outputs_match_truth_and_label_image(close_rig):
         assert box[5] > 0.3                               # the raised lid reaches 0.32 m
         mask, truth = rig.segmenter.eval_frame(rig.seg_context).segmentation.mask(), rig.object_mask()
         iou = (mask & truth).sum() / (mask | truth).sum()
-        assert iou >= 0.9, f"seed {seed}: IoU {iou:.3f}"
+        assert iou >= 0.98, f"seed {seed}: IoU {iou:.3f}"       # measured 0.988
 
 
 def test_deterministic_across_resets_and_plane_fitted_once(close_rig):
@@ -99,8 +103,8 @@ def test_deterministic_across_resets_and_plane_fitted_once(close_rig):
         rig.diagram.SetDefaultContext(rig.context)
         assert rig.segmenter.table_plane(rig.seg_context) is None     # not stored before the first update
         rig.reset(seed)                                               # processes the frame at t = 0
-        xyz, _ = _cloud_arrays(rig)
-        first_plane = fit_table_plane(xyz, rig.segmenter.config.segmentation, (480, 640),
+        xyz, _ = _cloud_arrays(rig, "object_point_cloud")
+        first_plane = fit_table_plane(xyz, rig.segmenter.config.segmentation, rig.station.object_camera.window.shape,
                                       seed=rig.segmenter.config.seed)
         rig.simulator.AdvanceTo(0.25)
         plane = rig.segmenter.table_plane(rig.seg_context)
@@ -115,8 +119,8 @@ def test_deterministic_across_resets_and_plane_fitted_once(close_rig):
     assert not np.allclose(a[2], c[2]) and not np.allclose(a[1], c[1])
 
 
-def _cloud_arrays(rig):
-    cloud = rig.station.GetOutputPort("point_cloud").Eval(rig.station.GetMyContextFromRoot(rig.context))
+def _cloud_arrays(rig, port="point_cloud"):
+    cloud = rig.station.GetOutputPort(port).Eval(rig.station.GetMyContextFromRoot(rig.context))
     return cloud.xyzs().T, cloud.rgbs().T
 
 
@@ -136,7 +140,11 @@ def test_hand_hiding_the_object_clears_the_flag_and_holds_outputs():
     log = []
     for k in range(41):                     # 4 s at the camera rate
         if k:
+            # To the frame instant and through its events (the plant's step, then the
+            # segmenter's update), as StationRecorder samples: the outputs are then
+            # those of the frame the update saw.
             rig.simulator.AdvanceTo(0.1 * k)
+            rig.simulator.AdvancePendingEvents()
         log.append(rig.outputs())
     valid = np.array([v[0] for v in log])
     assert valid[:12].all() and valid[-5:].all(), f"flags {valid.astype(int)}"

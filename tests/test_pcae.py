@@ -293,8 +293,3 @@ def test_codes_separate_lid_states(shipped):
     assert d_state >= 3.0 * d_pose, (d_state, d_pose)
     # Half open lies between closed and fully open.
     assert np.linalg.norm(c45 - c0) < d_state
-
-
-def test_time_encode_under_10ms():
-    ms = pcae.time_encode(20)
-    assert 0 < ms <= 10.0

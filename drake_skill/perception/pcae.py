@@ -192,10 +192,12 @@ class PointCloudAutoencoder(nn.Module):
         if self._folded is None:
             with torch.no_grad():
                 self._folded = [blk.folded() for blk in self.encoder]
-        y = x
+        # All points of the batch as one (B * N, C) matrix through every layer, the
+        # ReLU in place: one GEMM per layer and no intermediate reshapes or copies.
+        y = x.reshape(-1, x.shape[-1])
         for w, b in self._folded:
-            y = torch.relu(torch.addmm(b, y.reshape(-1, y.shape[-1]), w)).reshape(*x.shape[:-1], -1)
-        return y.amax(dim=-2)
+            y = torch.addmm(b, y, w).relu_()
+        return y.reshape(*x.shape[:-1], -1).amax(dim=-2)
 
     def encode_points(self, points, n_threads: int | None = 1) -> np.ndarray:
         """Codes of clouds in metres, world frame.
@@ -234,6 +236,9 @@ def _torch_threads(n: int | None):
         yield
         return
     old = torch.get_num_threads()
+    if old == n:          # the usual case: no thread-pool change per call
+        yield
+        return
     torch.set_num_threads(n)
     try:
         yield

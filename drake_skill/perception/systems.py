@@ -17,20 +17,27 @@ input and the table plane held in the state, so every output of one frame
 shares one computation, and an output evaluated right after the station's
 camera frame (e.g. after ``AdvanceTo(0)``, to latch X_WO at the start of a
 rollout) sees that frame. The station's cloud also depends on the plant's
-state (through the camera pose), so an evaluation after every plant step
-would segment again each time; the consumers (``PcaeFeaturizer``, the DMP's
-latch) read at the camera rate or once.
+state, so an evaluation after every plant step would segment again each
+time; the consumers (``PcaeFeaturizer``, the DMP's latch) read at the camera
+rate or once.
 
-Per-run data live in the context's abstract state, updated by a periodic
-unrestricted update every ``period_s`` (the camera rate, 10 Hz):
+Per-run data live in the context's discrete state, updated by a periodic
+*discrete* update every ``period_s`` (the camera rate, 10 Hz). The station's
+MultibodyPlant advances in an unrestricted update, which Drake applies
+before it computes the discrete updates due at the same instant; so this
+update and the ``PcaeFeaturizer``'s, both discrete, read the same (already
+stepped) scene, and the camera renders and the cloud is segmented once per
+frame for both. Groups:
 
-- ``table_plane``: ``[a, b, c, d]`` (world frame, ``a x + b y + c z + d = 0``,
-  unit normal, z up). The configured plane, or, when none is configured,
-  empty until the first update that sees a frame in which the plane could
-  be fitted (RANSAC seeded with ``seed``), then kept for the rest of the run:
-  the table does not move. Until it is stored, each evaluation fits it on
-  the current frame.
-- ``held``: the last valid frame's outputs (as of the latest update).
+- table plane (5): ``[stored, a, b, c, d]`` (world frame,
+  ``a x + b y + c z + d = 0``, unit normal, z up). The configured plane, or,
+  when none is configured, not stored until the first update that sees a
+  frame in which the plane could be fitted (RANSAC seeded with ``seed``),
+  then kept for the rest of the run: the table does not move. Until it is
+  stored, each evaluation fits it on the current frame.
+- held (1 + 1 + 3 + 7 + 3 n_points): ``[stored, yaw, position (3),
+  bounding_box (7), object_points (n_points x 3, row-major)]``, the last
+  valid frame's outputs (as of the latest update).
 
 Outputs, for the current frame when it is valid, otherwise the held ones
 (or the defaults before any valid frame):
@@ -54,7 +61,9 @@ Outputs, for the current frame when it is valid, otherwise the held ones
 
 Input ``point_cloud`` (abstract ``PointCloud`` with xyz and rgb, world frame,
 organised as an ``image_height`` x ``image_width`` image, row-major; missing
-returns non-finite): the station's ``point_cloud`` port. A cloud of another
+returns non-finite): the station's ``object_point_cloud`` port (the camera
+cropped to where the object can appear, ``drake_skill.station.camera``) or
+its full-frame ``point_cloud``. A cloud of another
 size or without colours raises ValueError: that is a wiring error, not an
 empty segmentation.
 
@@ -174,12 +183,17 @@ class ObjectSegmenterConfig:
         return self
 
 
-def segmenter_config_for_station(station_config) -> ObjectSegmenterConfig:
+def segmenter_config_for_station(station_config, window=None) -> ObjectSegmenterConfig:
     """The segmenter's configuration matching a ``StationConfig``: image size,
-    camera rate, and the object's nominal pose (default X_WO, nominal yaw)."""
+    camera rate, and the object's nominal pose (default X_WO, nominal yaw).
+
+    The image size is the full frame's, or that of ``window`` (a
+    :class:`~drake_skill.station.camera.CropWindow`, the station's
+    ``object_camera.window``) for the cropped object camera."""
     cam, obj = station_config.camera, station_config.object
-    config = ObjectSegmenterConfig(period_s=1.0 / cam.fps, image_width=cam.width,
-                                   image_height=cam.height, default_pose=[obj.x, obj.y, obj.yaw])
+    width, height = (cam.width, cam.height) if window is None else (window.width, window.height)
+    config = ObjectSegmenterConfig(period_s=1.0 / cam.fps, image_width=width,
+                                   image_height=height, default_pose=[obj.x, obj.y, obj.yaw])
     config.segmentation.nominal_yaw = obj.yaw
     return config.validate()
 
@@ -192,6 +206,17 @@ class _Estimate:
     bounding_box: np.ndarray
     position: np.ndarray
     yaw: float
+
+    def to_vector(self) -> np.ndarray:
+        """The held-state layout: [1, yaw, position (3), bounding box (7), points (3 n)]."""
+        return np.concatenate([[1.0, self.yaw], self.position, self.bounding_box, self.points.ravel()])
+
+    @classmethod
+    def from_vector(cls, v: np.ndarray, n_points: int) -> "_Estimate | None":
+        if v[0] < 0.5:
+            return None
+        points = np.array(v[12:], dtype=np.float64).reshape(n_points, 3)   # a copy: the state changes
+        return cls(points, np.array(v[5:12]), np.array(v[2:5]), float(v[1]))
 
 
 @dc.dataclass(frozen=True)
@@ -217,20 +242,21 @@ class ObjectSegmenter(LeafSystem):
         self._default_X_WO = RigidTransform(RotationMatrix.MakeZRotation(yaw), [x, y, 0.0])
 
         self._cloud_port = self.DeclareAbstractInputPort("point_cloud", Value(PointCloud()))
-        plane0 = np.asarray(config.table_plane, dtype=float)
-        if plane0.size:
-            plane0 = plane0 / np.linalg.norm(plane0[:3]) * (1.0 if plane0[2] >= 0 else -1.0)
-        self._plane_index = self.DeclareAbstractState(AbstractValue.Make(plane0))
-        self._held_index = self.DeclareAbstractState(AbstractValue.Make(None))
-        self.DeclarePeriodicUnrestrictedUpdateEvent(config.period_s, config.offset_s, self._update_memory)
+        plane0 = np.zeros(5)
+        if config.table_plane:
+            plane = np.asarray(config.table_plane, dtype=float)
+            plane0[0], plane0[1:] = 1.0, plane / np.linalg.norm(plane[:3]) * (1.0 if plane[2] >= 0 else -1.0)
+        n = config.n_points
+        self._plane_index = self.DeclareDiscreteState(plane0)
+        self._held_index = self.DeclareDiscreteState(np.zeros(12 + 3 * n))
+        self.DeclarePeriodicDiscreteUpdateEvent(config.period_s, config.offset_s, self._update_memory)
 
         self._frame_cache = self.DeclareCacheEntry(
             "segmentation of the current point cloud",
             ValueProducer(allocate=lambda: AbstractValue.Make(None), calc=self._calc_frame),
-            {self._cloud_port.ticket(), self.abstract_state_ticket(self._plane_index)},
+            {self._cloud_port.ticket(), self.discrete_state_ticket(self._plane_index)},
         )
-        deps = {self._frame_cache.ticket(), self.abstract_state_ticket(self._held_index)}
-        n = config.n_points
+        deps = {self._frame_cache.ticket(), self.discrete_state_ticket(self._held_index)}
         self._points_port = self.DeclareAbstractOutputPort(
             "object_points", lambda: AbstractValue.Make(np.zeros((n, 3))), self._calc_points, deps)
         self._box_port = self.DeclareVectorOutputPort(
@@ -269,8 +295,8 @@ class ObjectSegmenter(LeafSystem):
 
     def table_plane(self, context) -> np.ndarray | None:
         """The table plane stored in ``context`` (None until it has been fitted)."""
-        plane = context.get_abstract_state(self._plane_index).get_value()
-        return plane.copy() if plane.size else None
+        plane = context.get_discrete_state(self._plane_index).get_value()
+        return np.array(plane[1:]) if plane[0] > 0.5 else None
 
     # ------------------------------------------------------------ callbacks
     def _read_cloud(self, context) -> tuple[np.ndarray, np.ndarray]:
@@ -286,8 +312,10 @@ class ObjectSegmenter(LeafSystem):
     def _calc_frame(self, context, value):
         xyz, rgb = self._read_cloud(context)
         cfg = self._config
-        plane = context.get_abstract_state(self._plane_index).get_value()
-        if not plane.size:
+        stored = context.get_discrete_state(self._plane_index).get_value()
+        if stored[0] > 0.5:
+            plane = np.array(stored[1:])
+        else:
             try:
                 plane = fit_table_plane(xyz, cfg.segmentation, self._image_shape, seed=cfg.seed)
             except ValueError:        # blank frame, table hidden: no plane yet, not valid
@@ -303,17 +331,18 @@ class ObjectSegmenter(LeafSystem):
                                  float(result.box.yaw))
         value.set_value(_Frame(estimate, plane, result))
 
-    def _update_memory(self, context, state):
+    def _update_memory(self, context, discrete_state):
         frame = self._frame_cache.Eval(context)
-        if frame.plane is not None and not context.get_abstract_state(self._plane_index).get_value().size:
-            state.get_mutable_abstract_state(self._plane_index).set_value(frame.plane)
+        if frame.plane is not None and context.get_discrete_state(self._plane_index).get_value()[0] < 0.5:
+            discrete_state.get_mutable_vector(self._plane_index).SetFromVector(np.r_[1.0, frame.plane])
         if frame.estimate is not None:
-            state.get_mutable_abstract_state(self._held_index).set_value(frame.estimate)
+            discrete_state.get_mutable_vector(self._held_index).SetFromVector(frame.estimate.to_vector())
 
     def _estimate(self, context) -> _Estimate | None:
         estimate = self._frame_cache.Eval(context).estimate
         if estimate is None:
-            estimate = context.get_abstract_state(self._held_index).get_value()
+            estimate = _Estimate.from_vector(context.get_discrete_state(self._held_index).get_value(),
+                                             self._config.n_points)
         return estimate
 
     def _calc_points(self, context, output):
@@ -337,13 +366,21 @@ class ObjectSegmenter(LeafSystem):
 
 def add_object_segmenter(builder, station, config: ObjectSegmenterConfig | None = None,
                          name: str = "object_segmenter") -> ObjectSegmenter:
-    """Adds an :class:`ObjectSegmenter` to ``builder`` and connects the station's
-    ``point_cloud`` to it. ``config`` defaults to :func:`segmenter_config_for_station`
-    of ``station.config``."""
+    """Adds an :class:`ObjectSegmenter` to ``builder`` and connects the station's cloud to it.
+
+    The cloud is the station's cropped ``object_point_cloud`` when the station has
+    an object camera (``station.object_camera``) and ``config`` is None or sized
+    for its window, else the full-frame ``point_cloud``. ``config`` defaults to
+    :func:`segmenter_config_for_station` of ``station.config`` for that cloud.
+    """
+    camera = getattr(station, "object_camera", None)
     if config is None:
-        config = segmenter_config_for_station(station.config)
+        config = segmenter_config_for_station(station.config, camera.window if camera is not None else None)
+    port = "point_cloud"
+    if camera is not None and (config.image_height, config.image_width) == camera.window.shape:
+        port = camera.cloud_port_name
     segmenter = builder.AddNamedSystem(name, ObjectSegmenter(config))
-    builder.Connect(station.GetOutputPort("point_cloud"), segmenter.get_point_cloud_input_port())
+    builder.Connect(station.GetOutputPort(port), segmenter.get_point_cloud_input_port())
     return segmenter
 
 

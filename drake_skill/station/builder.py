@@ -302,6 +302,10 @@ class Station(Diagram):
         # The label image is ground truth for tests and data generation.
         builder.ExportOutput(sensor.label_image_output_port(), "label_image")
         self.camera_info = info
+        # The perception systems read the crop of this camera where the object can
+        # appear (object_point_cloud etc.; drake_skill/station/camera.py).
+        from drake_skill.station.camera import add_object_camera
+        self.object_camera = add_object_camera(builder, self, color, depth, world_id, self._X_WC)
 
     def camera_pose(self) -> RigidTransform:
         """X_WC of the camera (Drake camera convention)."""

@@ -29,7 +29,9 @@ oriented bounding box of every perception geometry of the object's bodies
 
 :func:`crop_window` projects them and takes their bounding rectangle plus
 ``margin_px`` pixels (covering the sampling of the yaw and joint and the
-rasteriser's edge pixels), clipped to the image. (The projection of a corner
+rasteriser's edge pixels), clipped to the image and grown, where needed, to
+hold the principal point (Drake's ``CameraInfo`` requires it inside the
+image). (The projection of a corner
 is a linear-fractional function of the base translation, extreme at the
 ends of the translation ranges; yaw and joint are sampled finely enough
 that the margin covers what lies between samples.)
@@ -168,10 +170,13 @@ def crop_window(points_W: np.ndarray, X_WC: RigidTransform, info: CameraInfo,
                          "aim the camera at the object (camera.position / camera.target)")
     u = info.focal_x() * p_C[0] / p_C[2] + info.center_x()
     v = info.focal_y() * p_C[1] / p_C[2] + info.center_y()
-    x0 = max(0, int(math.floor(u.min())) - margin_px)
-    y0 = max(0, int(math.floor(v.min())) - margin_px)
-    x1 = min(info.width(), int(math.ceil(u.max())) + 1 + margin_px)
-    y1 = min(info.height(), int(math.ceil(v.max())) + 1 + margin_px)
+    # Drake's CameraInfo needs the principal point inside the image: the window
+    # always holds the pixel around it.
+    cx, cy = info.center_x(), info.center_y()
+    x0 = max(0, min(int(math.floor(u.min())) - margin_px, int(math.floor(cx))))
+    y0 = max(0, min(int(math.floor(v.min())) - margin_px, int(math.floor(cy))))
+    x1 = min(info.width(), max(int(math.ceil(u.max())) + 1 + margin_px, int(math.floor(cx)) + 2))
+    y1 = min(info.height(), max(int(math.ceil(v.max())) + 1 + margin_px, int(math.floor(cy)) + 2))
     if x1 <= x0 or y1 <= y0:
         raise ValueError("the object's swept volume projects outside the camera image; "
                          "aim the camera at the object (camera.position / camera.target)")
