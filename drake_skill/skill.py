@@ -181,6 +181,10 @@ class Skill:
             f"{self.config.pomrp.goal_model.criterion.upper()}), terminal states "
             f"{list(map(int, self.pomrp.terminal_states))}",
             "state values: " + ", ".join(f"{i}: {v:.2f}" for i, v in enumerate(self.pomrp.values)),
+            (f"off-model guard: frames below {self.pomrp.explained_floor:.1f} nats (demonstrations' lowest "
+             f"{self.pomrp.frame_loglik_range[0]:.1f} - {self.pomrp.off_model_config.margin:g}) earn less reward "
+             "and fail the verdict" if self.pomrp.off_model_config.enabled
+             else "off-model guard: off (the thesis's plain reward and verdict)"),
             "demonstrations: " + ", ".join(
                 f"R = {r:.1f} ({'success' if ok else 'failure'})"
                 for r, ok in zip(self.info["demo_returns"], self.info["demo_verdicts"])),

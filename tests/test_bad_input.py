@@ -168,12 +168,13 @@ def test_version_1_skill_still_loads(saved_skill, tmp_path):
     meta["pomrp"].pop("off_model")
     _rewrite_arrays_plain = load_npz(directory / "arrays.npz")
     _rewrite_arrays_plain.pop("pomrp_frame_loglik_range")
+    _rewrite_arrays_plain.pop("pomrp_data_covar")
+    _rewrite_arrays_plain.pop("pomrp_references")
     atomic_save_npz(directory / "arrays.npz", _rewrite_arrays_plain)
-    text = (directory / "skill.yaml").read_text()
-    text = text.replace("  scale_by_amplitude: false\n", "")
-    text = "\n".join(line for line in text.splitlines() if "off_model" not in line and "margin: 10" not in line
-                     and "enabled" not in line) + "\n"
-    (directory / "skill.yaml").write_text(text)
+    import yaml
+    config = yaml.safe_load((directory / "skill.yaml").read_text())
+    del config["dmp"]["scale_by_amplitude"], config["pomrp"]["off_model"]  # fields added with schema 2
+    (directory / "skill.yaml").write_text(yaml.safe_dump(config))
     (directory / "skill.json").write_text(json.dumps(meta))
     skill = Skill.load(directory)
     assert skill.config.dmp.scale_by_amplitude  # the thesis form every version-1 skill was fitted with

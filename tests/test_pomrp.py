@@ -255,28 +255,39 @@ def test_off_model_weight_at_its_boundary(pomrp, held_out):
     G = held_out[0]
     floor = pomrp.explained_floor
     assert floor == pytest.approx(pomrp.frame_loglik_range[0] - 10.0)
-    gm = pomrp.goal_model
-    log_b = gm.log_emission(G)
-    shift = log_b.max(axis=1) - floor  # >= 0 on demonstration-like data
-    assert np.all(shift > 0)
-    np.testing.assert_array_equal(pomrp.explained_weights(log_b), 1.0)
-    lowered = log_b - (shift + 1.5)[:, None]  # every frame 1.5 nats below the floor
-    np.testing.assert_allclose(pomrp.explained_weights(lowered), np.exp(-1.5), rtol=1e-12)
-    # Move the last frame away from its state until it falls just below / above the floor.
-    last = G[-1]
-    direction = np.ones_like(last) / np.sqrt(last.size)
-    def final_ll(alpha):
+    # l_t: the nearest demonstration frame's log-density under the demonstrations' frame covariance S.
+    gm, S = pomrp.goal_model, pomrp.data_covar
+    assert pomrp.references.shape == (155, 8)  # the three demonstrations' frames
+    Sinv = np.linalg.inv(S)
+    ref = np.array([max(-0.5 * (g - x) @ Sinv @ (g - x) for x in pomrp.references) for g in G])
+    ref -= 0.5 * (G.shape[1] * np.log(2 * np.pi) + np.linalg.slogdet(S)[1])
+    np.testing.assert_allclose(pomrp.frame_loglik(G), ref, rtol=1e-10)
+    assert np.all(ref > floor)
+    np.testing.assert_array_equal(pomrp.explained_weights(G), 1.0)
+    # Frames pushed away from the data: the weight is the likelihood ratio to the floor.
+    rng = np.random.default_rng(0)
+    H = G + rng.standard_normal(G.shape) * np.linspace(0.0, 3.0, len(G))[:, None]
+    l_H = pomrp.frame_loglik(H)
+    w = pomrp.explained_weights(H)
+    assert (w == 1.0).any() and (w < 1e-3).any()
+    np.testing.assert_allclose(w, np.exp(np.minimum(0.0, l_H - floor)), rtol=1e-12)
+    # The verdict's boundary: move the last frame until it falls just below the floor.
+    direction = np.ones(G.shape[1]) / np.sqrt(G.shape[1])
+
+    def details(alpha):
         H = G.copy()
-        H[-1] = last + alpha * direction
+        H[-1] = G[-1] + alpha * direction
         return pomrp.verdict_details(H)
-    lo, hi = 0.0, 5.0
-    assert final_ll(lo)["final_frame_explained"] and not final_ll(hi)["final_frame_explained"]
-    for _ in range(40):
+    lo, hi = 0.0, 20.0
+    assert details(lo)["final_frame_explained"] and not details(hi)["final_frame_explained"]
+    for _ in range(50):
         mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if final_ll(mid)["final_frame_explained"] else (lo, mid)
-    assert final_ll(lo)["final_frame_loglik"] >= floor > final_ll(hi)["final_frame_loglik"]
-    assert final_ll(hi)["final_frame_loglik"] == pytest.approx(floor, abs=1e-6)
-    assert not final_ll(hi)["success"]
+        lo, hi = (mid, hi) if details(mid)["final_frame_explained"] else (lo, mid)
+    assert details(lo)["final_frame_loglik"] >= floor > details(hi)["final_frame_loglik"]
+    assert details(hi)["final_frame_loglik"] == pytest.approx(floor, abs=1e-6)
+    assert not details(hi)["success"]
+    plain = Pomrp(gm, pomrp.values, pomrp.verdict_config, {}, OffModelConfig(enabled=False))
+    assert plain.verdict_details(G)["final_frame_explained"]
 
 
 def test_verdict_is_decided_by_the_last_viterbi_frame(pomrp):

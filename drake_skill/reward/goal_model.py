@@ -758,17 +758,6 @@ class GoalHMM:
         G, _ = check_sequences(G, name="G", n_features=self.n_features_in_)
         return gaussian_log_density(G, self.means_, self._prec_chol, self._log_norm)
 
-    def frame_loglik(self, G=None, *, log_b=None) -> np.ndarray:
-        """``l_t = max_i log z_i(g_t)`` (nats), ``(T,)``: how well the best state explains each frame.
-
-        Pass ``G: (T, d)`` or precomputed ``log_b: (T, k)``.  This is the
-        per-frame quantity of the off-model guard (docs/method.md section 4,
-        "Observations the goal model cannot explain").
-        """
-        if log_b is None:
-            log_b = self.log_emission(G)
-        return np.asarray(log_b, dtype=float).max(axis=1)
-
     def filtered_posteriors(self, G) -> np.ndarray:
         """``P(s_t | g_1..g_t)``, ``(T, k)``, for one sequence ``G: (T, d)``."""
         return forward_backward(self.log_emission(G), self.startprob_, self.transmat_, smooth=False)[0]

@@ -14,14 +14,19 @@ For an execution's goal data ``G = g_1..g_T`` (``G: (T, d)``, 10 Hz frames):
   margin (:class:`VerdictConfig`);
 * off-model guard (a deliberate extension of the thesis, docs/method.md
   section 4, "Observations the goal model cannot explain";
-  :class:`OffModelConfig`): each frame's best-state log-density
-  ``l_t = max_i log z_i(g_t)`` (nats) is compared with the lowest value
-  ``l_lo`` seen on the demonstration frames.  The dense reward of frame ``t``
-  is multiplied by ``w_t = min(1, exp(l_t - (l_lo - margin)))`` (1 on
-  everything the demonstrations looked like, the likelihood ratio below), and
-  the verdict also requires the final frame to be explained
-  (``l_T >= l_lo - margin``).  ``OffModelConfig(enabled=False)`` is the
-  thesis's plain form.
+  :class:`OffModelConfig`): each frame's log-likelihood
+  ``l_t = max_j log N(g_t; x_j, S)`` (nats) against the demonstration
+  frames ``x_j``, with ``S`` the covariance of all demonstration frames (the
+  spread the demonstrations covered; the per-state covariances, fitted on two
+  or three demonstrations, are far too tight to judge a new object pose), is
+  compared with the range the demonstrations show against each other:
+  ``l_lo`` = the ``quantile`` (5 %) of every demonstration frame's ``l``
+  against the *other* demonstrations' frames.  The dense reward of frame
+  ``t`` is multiplied by ``w_t = min(1, exp(l_t - (l_lo - margin)))`` (1 on
+  everything as close to the demonstrations as they are to each other, the
+  likelihood ratio below), and the verdict also requires the final frame to
+  be explained (``l_T >= l_lo - margin``).  ``OffModelConfig(enabled=False)``
+  is the thesis's plain form.
 
 Values ``v`` come from :mod:`drake_skill.reward.mrp`; rewards are unitless
 (value per frame), returns are sums over frames.
@@ -37,6 +42,7 @@ from scipy.special import logsumexp
 from drake_skill.reward.goal_model import (
     GoalHMM,
     GoalModelConfig,
+    _precision_cholesky,
     check_sequences,
     forward_backward,
     gaussian_log_density,
@@ -70,15 +76,22 @@ class OffModelConfig:
       enabled: weight each frame's dense reward by how well the goal model
         explains it and require an explained final frame for success; False
         gives the thesis's plain Eqs. 4.4-4.5 and verdict.
-      margin: nats per frame below the lowest best-state log-density seen on
-        the demonstrations that still count as explained (weight 1).  A
-        project choice: 10 nats is a likelihood ratio of e^-10, e.g. a frame
-        at 6 standard deviations from its state where the demonstrations
-        reached 4.
+      margin: nats per frame below ``l_lo`` that still count as explained
+        (weight 1).  A project choice: 10 nats is a likelihood ratio of e^-10;
+        with ``l_t`` a Gaussian log-density it lets the squared Mahalanobis
+        distance (under ``S``) to the nearest demonstration frame exceed the
+        demonstrations' own by 20.
+      quantile: which quantile of the demonstrations' leave-one-demonstration-out
+        ``l`` is ``l_lo`` (0 = the minimum; 0.05 ignores the few transit frames
+        where one demonstration moves faster than another).
+      covar_reg: ridge added to ``S``, relative to its mean variance (keeps a
+        direction the demonstrations never moved in from making ``S`` singular).
     """
 
     enabled: bool = True
     margin: float = 10.0
+    quantile: float = 0.05
+    covar_reg: float = 1e-3
 
 
 @dataclass
@@ -104,11 +117,14 @@ class Pomrp:
         ``frame_loglik_range`` is given, the plain form otherwise).
       frame_loglik_range: ``(min, max)`` of ``l_t`` over the demonstration
         frames (nats); required when the guard is enabled.
+      data_covar: ``S (d, d)``, the regularised covariance of all
+        demonstration frames; references: ``(N, d)`` the demonstration frames
+        ``x_j`` (:func:`fit_pomrp` computes all three).
     """
 
     def __init__(self, goal_model: GoalHMM, values, verdict: VerdictConfig | None = None,
                  info: dict[str, Any] | None = None, off_model: OffModelConfig | None = None,
-                 frame_loglik_range=None):
+                 frame_loglik_range=None, data_covar=None, references=None):
         goal_model._check_fitted()
         v = np.asarray(values, dtype=float)
         k = goal_model.n_states_
@@ -130,11 +146,33 @@ class Pomrp:
             if r.shape != (2,) or not np.all(np.isfinite(r)) or r[0] > r[1]:
                 raise ValueError(f"frame_loglik_range: expected finite (min, max) nats, got {r}")
             frame_loglik_range = (float(r[0]), float(r[1]))
-        elif self.off_model_config.enabled:
-            raise ValueError("frame_loglik_range: required with off_model.enabled (the range of "
-                             "l_t over the demonstrations, recorded by fit_pomrp); refit, or pass "
-                             "OffModelConfig(enabled=False) for the thesis's plain rewards")
+        if self.off_model_config.enabled and (frame_loglik_range is None or data_covar is None
+                                              or references is None):
+            raise ValueError("frame_loglik_range, data_covar, references: required with off_model.enabled "
+                             "(the demonstrations' l range, frame covariance and frames, recorded by "
+                             "fit_pomrp); refit, or pass OffModelConfig(enabled=False) for the thesis's "
+                             "plain rewards")
         self.frame_loglik_range = frame_loglik_range
+        self.data_covar = None
+        if data_covar is not None:
+            d = goal_model.n_features_in_
+            S = np.asarray(data_covar, dtype=float)
+            if S.shape != (d, d) or not np.all(np.isfinite(S)) or not np.allclose(S, S.T):
+                raise ValueError(f"data_covar: expected a finite symmetric ({d}, {d}) covariance, got shape {S.shape}")
+            try:
+                self._om_prec, self._om_log_norm = _precision_cholesky(np.broadcast_to(S, (1, d, d)).copy())
+            except np.linalg.LinAlgError as e:
+                raise ValueError("data_covar: not positive definite") from e
+            self.data_covar = S
+        self.references = None
+        if references is not None:
+            R = np.asarray(references, dtype=float)
+            if R.ndim != 2 or R.shape[1] != goal_model.n_features_in_ or len(R) == 0 or not np.all(np.isfinite(R)):
+                raise ValueError(f"references: expected finite demonstration frames (N, "
+                                 f"{goal_model.n_features_in_}), got shape {R.shape}")
+            self.references = R
+            if self.data_covar is not None:
+                self._om_ref = R @ self._om_prec[0]  # whitened: |(g - x) U|^2 = squared Mahalanobis
         # Parameters cached once: the reward path must stay well under 1 ms.
         self._startprob = goal_model.startprob_
         self._transmat = goal_model.transmat_
@@ -172,12 +210,22 @@ class Pomrp:
             return -np.inf
         return self.frame_loglik_range[0] - float(self.off_model_config.margin)
 
-    def explained_weights(self, log_b: np.ndarray) -> np.ndarray:
-        """``w_t = min(1, exp(l_t - (l_lo - margin)))`` for ``log_b: (T, k)``; all ones when off."""
+    def frame_loglik(self, G) -> np.ndarray:
+        """``l_t = max_j log N(g_t; x_j, S)`` (nats), ``(T,)``, for checked ``G: (T, d)``."""
+        if self.data_covar is None or self.references is None:
+            raise ValueError("frame_loglik: this reward has no data_covar/references (saved before the "
+                             "off-model guard)")
+        return _nearest_loglik(np.asarray(G, dtype=float) @ self._om_prec[0], self._om_ref,
+                               float(self._om_log_norm[0]))
+
+    def explained_weights(self, G) -> np.ndarray:
+        """``w_t = min(1, exp(l_t - (l_lo - margin)))`` for checked ``G: (T, d)``; all ones when off."""
         if not self.off_model_config.enabled:
-            return np.ones(len(log_b))
-        l_t = np.asarray(log_b, dtype=float).max(axis=1)
-        return np.exp(np.minimum(0.0, l_t - self.explained_floor))
+            return np.ones(len(G))
+        return np.exp(np.minimum(0.0, self.frame_loglik(G) - self.explained_floor))
+
+    def _checked(self, G) -> np.ndarray:
+        return check_sequences(G, name="G", n_features=self.n_features)[0]
 
     # -------------------------------------------------------------- rewards
     def posteriors(self, G):
@@ -186,9 +234,9 @@ class Pomrp:
 
     def reward_and_return(self, G) -> tuple[np.ndarray, float]:
         """Dense rewards ``h (T,)`` (Eq. 4.4, times the off-model weight ``w_t``) and return ``R`` (Eq. 4.5)."""
-        log_b = self._log_b(G)
-        _, smoothed, _ = forward_backward(log_b, self._startprob, self._transmat)
-        h = (smoothed @ self.values) * self.explained_weights(log_b)
+        G = self._checked(G)
+        _, smoothed, _ = forward_backward(self._log_b(G), self._startprob, self._transmat)
+        h = (smoothed @ self.values) * self.explained_weights(G)
         return h, float(h.sum())
 
     def rewards(self, G) -> np.ndarray:
@@ -201,9 +249,9 @@ class Pomrp:
 
     def filtered_rewards(self, G) -> np.ndarray:
         """Reward available online at each ``t``: ``sum_s v(s) P(s_t = s | g_1..g_t)``, ``(T,)``."""
-        log_b = self._log_b(G)
-        filtered, _, _ = forward_backward(log_b, self._startprob, self._transmat, smooth=False)
-        return (filtered @ self.values) * self.explained_weights(log_b)
+        G = self._checked(G)
+        filtered, _, _ = forward_backward(self._log_b(G), self._startprob, self._transmat, smooth=False)
+        return (filtered @ self.values) * self.explained_weights(G)
 
     # ------------------------------------------------------------ streaming
     def log_emission_frame(self, g) -> np.ndarray:
@@ -237,7 +285,7 @@ class Pomrp:
             la = logsumexp(lb[:, None] + self._log_transmat, axis=0) + log_b
         c = float(logsumexp(la))
         la = la - c
-        w = float(self.explained_weights(log_b[None, :])[0])
+        w = float(self.explained_weights(np.asarray(g, dtype=float)[None, :])[0])
         return la, c, float(np.exp(la) @ self.values) * w
 
     # -------------------------------------------------------------- verdict
@@ -249,6 +297,7 @@ class Pomrp:
         ``final_frame_loglik`` (``l_T``, nats), ``final_frame_explained``
         (``l_T >= l_lo - margin``; True when the guard is off), ``success``.
         """
+        G = self._checked(G)
         log_b = self._log_b(G)
         path, _ = viterbi(log_b, self._startprob, self._transmat)
         _, _, ll = forward_backward(log_b, self._startprob, self._transmat, smooth=False)
@@ -256,8 +305,8 @@ class Pomrp:
         lo, hi = self.loglik_range
         terminal = bool(np.isin(path[-1], self.terminal_states))
         in_range = bool(lo <= per_step <= hi)
-        final_ll = float(log_b[-1].max())
-        explained = bool(final_ll >= self.explained_floor)
+        final_ll = float(self.frame_loglik(G[-1:])[0]) if self.references is not None else np.nan
+        explained = bool(not self.off_model_config.enabled or final_ll >= self.explained_floor)
         success = terminal and explained and (in_range or not self.verdict_config.require_likelihood)
         return {"final_state": int(path[-1]), "terminal": terminal, "loglik_per_step": float(per_step),
                 "loglik_in_range": in_range, "final_frame_loglik": final_ll,
@@ -276,6 +325,10 @@ class Pomrp:
         out["values"] = self.values.copy()
         if self.frame_loglik_range is not None:
             out["frame_loglik_range"] = np.array(self.frame_loglik_range)
+        if self.data_covar is not None:
+            out["data_covar"] = self.data_covar.copy()
+        if self.references is not None:
+            out["references"] = self.references.copy()
         return out, {"hmm": meta, "info": self.info, "verdict": {
             "require_likelihood": bool(self.verdict_config.require_likelihood),
             "loglik_margin": float(self.verdict_config.loglik_margin)},
@@ -303,7 +356,7 @@ class Pomrp:
         except TypeError as e:
             raise ValueError(f"POMRP metadata: {e}") from e
         return cls(hmm, values, verdict, metadata.get("info", {}), off_model,
-                   arrays.get("frame_loglik_range"))
+                   arrays.get("frame_loglik_range"), arrays.get("data_covar"), arrays.get("references"))
 
 
 def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
@@ -322,5 +375,31 @@ def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
                            terminal_scale=mc.terminal_scale, random_state=mc.random_state)
     info = {"mrp": dataclasses.asdict(mc), "mrp_length": L}
     X, lengths = check_sequences(X, lengths)
-    l_t = hmm.frame_loglik(X)
-    return Pomrp(hmm, v, config.verdict, info, config.off_model, (float(l_t.min()), float(l_t.max())))
+    om = config.off_model
+    if not (np.isfinite(om.covar_reg) and om.covar_reg > 0):
+        raise ValueError(f"off_model.covar_reg: expected a finite value > 0, got {om.covar_reg}")
+    if not 0.0 <= om.quantile < 1.0:
+        raise ValueError(f"off_model.quantile: expected a value in [0, 1), got {om.quantile}")
+    S = np.atleast_2d(np.cov(X.T, bias=True))
+    mean_var = float(np.trace(S)) / len(S)
+    S = S + float(om.covar_reg) * (mean_var if mean_var > 0 else 1.0) * np.eye(len(S))
+    U, log_norm = _precision_cholesky(S[None])
+    Y = X @ U[0]
+    # Each demonstration's frames against the other demonstrations' (a single
+    # demonstration: against the state means).
+    parts = []
+    ends = np.cumsum(lengths)
+    for end, n in zip(ends, lengths):
+        own = np.zeros(len(X), bool)
+        own[end - n:end] = True
+        others = Y[~own] if len(lengths) > 1 else hmm.means_ @ U[0]
+        parts.append(_nearest_loglik(Y[own], others, float(log_norm[0])))
+    l_loo = np.concatenate(parts)
+    l_range = (float(np.quantile(l_loo, om.quantile)), float(l_loo.max()))
+    return Pomrp(hmm, v, config.verdict, info, om, l_range, S, X)
+
+
+def _nearest_loglik(Y: np.ndarray, R: np.ndarray, log_norm: float) -> np.ndarray:
+    """``log_norm - 0.5 min_j |y_t - r_j|^2`` for whitened frames ``Y (T, d)`` and references ``R (N, d)``."""
+    d2 = (Y * Y).sum(axis=1)[:, None] + (R * R).sum(axis=1)[None, :] - 2.0 * (Y @ R.T)
+    return log_norm - 0.5 * np.maximum(d2.min(axis=1), 0.0)
