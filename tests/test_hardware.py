@@ -7,11 +7,14 @@ in a second process inside a network namespace of its own.
 """
 
 import copy
+import json
+import os
 import shutil
 import subprocess
 import sys
 import textwrap
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -109,6 +112,10 @@ def test_greedy_policy_on_the_simulated_robot_matches_direct_simulation(draw_ski
 
     lcm = DrakeLcm("memq://")
     hardware_config = _hardware_config(config)
+    # Two real-time simulators share this process (and its GIL) on a loaded
+    # machine: a looser status timeout than the default 100 ms, which the
+    # safety test below checks.
+    hardware_config.status_timeout = 0.3
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
     runner = RolloutRunner(model, config=rollout, station=build_hardware_station(hardware_config, lcm=lcm))
     robot.start(seed=5)
@@ -299,3 +306,77 @@ def test_hardware_config_errors_name_the_field():
         load_hardware_config(data="status_chanel: X")
     config = load_hardware_config(data="lcm_url: memq://\ncommand_channel: FRANKA_CMD")
     assert config.command_channel == "FRANKA_CMD" and config.status_channel == "PANDA_STATUS"
+
+
+# --------------------------------------------------------------------------- across processes
+UDP_URL = "udpm://239.255.76.67:7667?ttl=0"
+
+
+def _network_namespace_problem() -> str | None:
+    """Why a private network namespace with multicast on its loopback cannot be made (None: it can)."""
+    if shutil.which("unshare") is None or shutil.which("ip") is None:
+        return "unshare or ip is not installed"
+    probe = subprocess.run(["unshare", "-rn", "sh", "-c", "ip link set lo up && ip route add 224.0.0.0/4 dev lo"],
+                           capture_output=True, text=True, timeout=30)
+    if probe.returncode != 0:
+        return f"user and network namespaces are not permitted here ({probe.stderr.strip() or probe.returncode})"
+    return None
+
+
+def test_hardware_cli_against_sim_robot_in_another_process(tmp_path, tmp_path_factory):
+    """``drake-skill sim-robot`` and ``drake-skill hardware run`` / ``record-demo`` as two
+    processes over UDP multicast, inside a network namespace of the test's own
+    (its loopback only: nothing reaches the host's network)."""
+    problem = _network_namespace_problem()
+    if problem is not None:
+        pytest.skip(f"cross-process LCM test needs a private network namespace: {problem}")
+    from learning_support import shared_skill, small_station
+    from pydrake.common.yaml import yaml_dump_typed
+
+    from drake_skill.demos.format import load_demonstration
+
+    skill_dir = shared_skill(tmp_path_factory)["skill_dir"]
+    config = HardwareConfig(lcm_url=UDP_URL)
+    config.station = small_station("close")       # 160 x 120 camera: small image messages
+    # Two processes with real-time simulators and a PCAE on 2 shared cores: the
+    # robot's status may stall longer than the default 100 ms (a real driver
+    # runs on its own real-time computer); stale status is tested in-process.
+    config.status_timeout = 0.5
+    config.reset_timeout = 120.0                  # record-demo waits for the robot it starts before
+    (tmp_path / "hardware.yaml").write_text(yaml_dump_typed(config))
+    cli = f"{sys.executable} -m drake_skill.cli.main"
+    robot = f"{cli} sim-robot --config hardware.yaml --skill close --seed 7 --duration 120"
+    script = textwrap.dedent(f"""
+        set -e
+        ip link set lo up
+        ip route add 224.0.0.0/4 dev lo
+        cd {tmp_path}
+        {robot} > robot_run.txt 2>&1 &
+        ROBOT=$!
+        {cli} hardware run --skill {skill_dir} --config hardware.yaml --yes --rollouts 1 --seed0 7 --out run \\
+            > run.txt 2>&1 || echo "hardware run exit $?" >> run.txt
+        kill -TERM $ROBOT; wait $ROBOT || true
+        {cli} hardware record-demo --skill close --config hardware.yaml --yes --seed 7 --duration 3 --out demos \\
+            > demo.txt 2>&1 &
+        DEMO=$!
+        {robot} --guide > robot.txt 2>&1 &
+        ROBOT=$!
+        wait $DEMO || echo "record-demo exit $?" >> demo.txt
+        kill -TERM $ROBOT; wait $ROBOT || true
+    """)
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(Path(__file__).resolve().parents[1]))
+    done = subprocess.run(["unshare", "-rn", "bash", "-c", script], capture_output=True, text=True, timeout=400,
+                          env=env)
+    logs = {name: (tmp_path / name).read_text() if (tmp_path / name).exists() else ""
+            for name in ("robot_run.txt", "run.txt", "robot.txt", "demo.txt")}
+    assert done.returncode == 0, (done.stderr, logs)
+    report = json.loads((tmp_path / "run" / "hardware_run.json").read_text())
+    (rollout,) = report["rollouts"]
+    assert not rollout["failed"], (rollout["message"], logs)
+    assert rollout["n_frames"] > 10 and np.isfinite(rollout["dense_return"])     # the learned reward saw it
+    assert rollout["final_object_state"] is not None                              # the robot's ground truth
+    assert "dropped as expired 0" in logs["robot_run.txt"], logs["robot_run.txt"]
+    demo = load_demonstration(tmp_path / "demos" / "demo_000.npz")
+    assert demo.metadata["source"] == "kinesthetic" and demo.has_perception
+    travel = np.sum(np.linalg.norm(np.diff(demo.X_OE_100hz[:, :3], axis=0), axis=1))
+    assert travel > 0.05, f"the guided hand moved {travel:.3f} m"

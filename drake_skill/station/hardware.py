@@ -10,8 +10,9 @@ hold (docs/architecture.md, "One diagram per skill execution"; the pattern of
     ee_pose_desired --> [workspace clip] --> [EndEffectorController] --q--> [command encoder] --> LCM PANDA_COMMAND
     gripper_command --> [SchunkWsgCommandSender] --> LCM PANDA_HAND_COMMAND
     LCM PANDA_STATUS --> [PandaStatusReceiver] --> panda_state, ee_pose (forward kinematics), torque_external
-                     \\-> [status monitor]: stale status, the robot's own reflex, the shared reflex limits
+                     \\-> [status monitor]: stale status, the robot's own reflex
     LCM camera images --> [LcmImageArrayDecoder] --> color/depth/label_image --> [DepthImageToPointCloud] --> point_cloud
+                      \\-> [ImageCrop] --> object_*_image --> [DepthImageToPointCloud] --> object_point_cloud
 
 Talking to the drake-franka-driver (``--control_mode=position``):
 
@@ -287,6 +288,55 @@ class LcmImageArrayDecoder(LeafSystem):
         output.set_value(image)
 
 
+class ImageCrop(LeafSystem):
+    """Colour, depth and label images in; their crop to ``window`` (a
+    :class:`~drake_skill.station.camera.CropWindow`) out: the object camera's
+    images, cut from the full frame instead of rendered."""
+
+    def __init__(self, window):
+        super().__init__()
+        from pydrake.systems.sensors import ImageDepth32F, ImageLabel16I, ImageRgba8U
+
+        self._window = window
+        w, h = window.width, window.height
+        for name, kind in (("color_image", ImageRgba8U), ("depth_image", ImageDepth32F),
+                           ("label_image", ImageLabel16I)):
+            port = self.DeclareAbstractInputPort(name, Value(kind(w, h)))
+            self.DeclareAbstractOutputPort(
+                f"object_{name}", lambda kind=kind: Value(kind(w, h)),
+                lambda context, output, port=port, kind=kind: self._calc_crop(context, output, port, kind),
+                {port.ticket()})
+
+    def _calc_crop(self, context, output, port, kind):
+        image = kind(self._window.width, self._window.height)
+        image.mutable_data[:] = self._window.crop(port.Eval(context).data)
+        output.set_value(image)
+
+
+class _ObjectModel:
+    """The scenario's object alone in a plant (its perception geometry), for
+    sizing the object camera's window as the simulated station does
+    (``drake_skill.station.camera.object_swept_points``)."""
+
+    def __init__(self, station_config):
+        from pydrake.multibody.parsing import Parser
+        from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
+
+        from drake_skill.station.builder import _OBJECTS
+        from drake_skill.station.models import add_package_paths, model_url
+
+        builder = DiagramBuilder()
+        self.plant, self.scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
+        parser = Parser(self.plant)
+        add_package_paths(parser.package_map())
+        sdf, base_name, joint_name = _OBJECTS[station_config.object.kind]
+        self.object_instance = parser.AddModels(url=model_url(sdf))[0]
+        self.object_base = self.plant.GetBodyByName(base_name, self.object_instance)
+        self.object_joint = self.plant.GetJointByName(joint_name, self.object_instance)
+        self.plant.Finalize()
+        self.config = station_config
+
+
 class PlacedObjectPose(LeafSystem):
     """Holds, as an abstract parameter, the pose the object was placed at for this run."""
 
@@ -377,6 +427,8 @@ class HardwareStation(Diagram):
             station owns its LcmInterfaceSystem: it is the one that handles
             the subscriptions of that DrakeLcm.
         meshcat: unused (kept for the signature of ``build_station``).
+        commanding: send position and hand commands (False: only listen,
+            e.g. while a person guides the arm for a kinesthetic demonstration).
     """
 
     realtime = True
@@ -384,7 +436,8 @@ class HardwareStation(Diagram):
     #: simulated robot publishes it on ``ground_truth_channel``.
     has_ground_truth = False
 
-    def __init__(self, config: HardwareConfig, lcm: DrakeLcm | None = None, meshcat=None):
+    def __init__(self, config: HardwareConfig, lcm: DrakeLcm | None = None, meshcat=None,
+                 commanding: bool = True):
         super().__init__()
         self.hardware_config = validate_hardware_config(config)
         self.config = config.station
@@ -425,19 +478,21 @@ class HardwareStation(Diagram):
         builder.Connect(controller.GetOutputPort("panda_state_desired"), q_only.get_input_port())
         encoder = builder.AddNamedSystem("command_encoder", PandaCommandEncoder())
         builder.Connect(q_only.get_output_port(), encoder.get_input_port())
-        publisher = builder.AddNamedSystem("command_publisher", LcmPublisherSystem.Make(
-            config.command_channel, lcmt_panda_command, self.lcm, publish_period=config.command_period))
-        builder.Connect(encoder.get_output_port(), publisher.get_input_port())
+        if commanding:
+            publisher = builder.AddNamedSystem("command_publisher", LcmPublisherSystem.Make(
+                config.command_channel, lcmt_panda_command, self.lcm, publish_period=config.command_period))
+            builder.Connect(encoder.get_output_port(), publisher.get_input_port())
 
         # Gripper.
         hand = builder.AddNamedSystem("hand_command", SchunkWsgCommandSender())
         builder.ExportInput(hand.GetInputPort("position"), "gripper_command")
         force = builder.AddNamedSystem("hand_force", ConstantVectorSource([config.hand_force]))
         builder.Connect(force.get_output_port(), hand.GetInputPort("force_limit"))
-        hand_pub = builder.AddNamedSystem("hand_publisher", LcmPublisherSystem.Make(
-            config.hand_command_channel, lcmt_schunk_wsg_command, self.lcm, publish_period=0.1,
-            use_cpp_serializer=True))
-        builder.Connect(hand.get_output_port(), hand_pub.get_input_port())
+        if commanding:
+            hand_pub = builder.AddNamedSystem("hand_publisher", LcmPublisherSystem.Make(
+                config.hand_command_channel, lcmt_schunk_wsg_command, self.lcm, publish_period=0.1,
+                use_cpp_serializer=True))
+            builder.Connect(hand.get_output_port(), hand_pub.get_input_port())
 
         # No ground truth on the robot; a simulated robot publishes its own.
         self._truth_sub = None
@@ -458,6 +513,7 @@ class HardwareStation(Diagram):
         self.placed_pose = builder.AddNamedSystem("placed_object_pose", PlacedObjectPose())
 
         self._camera_sub = None
+        self.object_camera = None
         if self.config.enable_camera:
             self._add_camera(builder)
         builder.BuildInto(self)
@@ -490,6 +546,24 @@ class HardwareStation(Diagram):
         builder.ExportOutput(color, "color_image")
         builder.ExportOutput(depth, "depth_image")
         builder.ExportOutput(label, "label_image")
+        # The object camera: the same crop of the frame as the simulated station's.
+        from drake_skill.station.camera import (MARGIN_PX, ObjectCamera, crop_camera_info, crop_window,
+                                                object_swept_points)
+
+        window = crop_window(object_swept_points(_ObjectModel(self.config)), X_WC, info, MARGIN_PX)
+        crop_info = crop_camera_info(info, window)
+        crop = builder.AddNamedSystem("object_crop", ImageCrop(window))
+        for name, port in (("color_image", color), ("depth_image", depth), ("label_image", label)):
+            builder.Connect(port, crop.GetInputPort(name))
+        crop_cloud = builder.AddNamedSystem("object_depth_to_cloud", DepthImageToPointCloud(
+            crop_info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
+        builder.Connect(crop.GetOutputPort("object_depth_image"), crop_cloud.depth_image_input_port())
+        builder.Connect(crop.GetOutputPort("object_color_image"), crop_cloud.color_image_input_port())
+        builder.Connect(pose.get_output_port(), crop_cloud.camera_pose_input_port())
+        self.object_camera = ObjectCamera(window, crop_info, None)
+        builder.ExportOutput(crop_cloud.point_cloud_output_port(), self.object_camera.cloud_port_name)
+        for name in ("color_image", "depth_image", "label_image"):
+            builder.ExportOutput(crop.GetOutputPort(f"object_{name}"), f"object_{name}")
 
     # ------------------------------------------------------------------ object placement
     def nominal_object_pose(self) -> RigidTransform:
@@ -578,6 +652,7 @@ class _Selector(LeafSystem):
 
 
 def build_hardware_station(config: HardwareConfig | None = None, lcm: DrakeLcm | None = None,
-                           meshcat=None) -> HardwareStation:
+                           meshcat=None, commanding: bool = True) -> HardwareStation:
     """Builds the hardware station described by ``config`` (defaults: the Open scenario)."""
-    return HardwareStation(config if config is not None else HardwareConfig(), lcm=lcm, meshcat=meshcat)
+    return HardwareStation(config if config is not None else HardwareConfig(), lcm=lcm, meshcat=meshcat,
+                           commanding=commanding)

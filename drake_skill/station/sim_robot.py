@@ -192,10 +192,15 @@ class SimRobot:
             this diagram's subscribers from that thread; publishing is
             thread-safe).
         expire_sec: the driver's ``--expire_sec``.
+        guide: a skill name: instead of following commands, the arm is moved
+            through that skill's scripted, human-like demonstration
+            (``drake_skill.demos.demonstrator.humanlike_plan`` for the run's
+            seed) by an end-effector controller of its own: a person guiding
+            the compliant arm, for recording kinesthetic demonstrations.
     """
 
     def __init__(self, config: HardwareConfig | None = None, lcm: DrakeLcm | None = None,
-                 pump: bool = True, meshcat=None, expire_sec: float = 0.1):
+                 pump: bool = True, meshcat=None, expire_sec: float = 0.1, guide: str | None = None):
         self.config = validate_hardware_config(config if config is not None else HardwareConfig())
         self.lcm = lcm if lcm is not None else DrakeLcm(self.config.lcm_url)
         station_config = self.config.station
@@ -223,7 +228,22 @@ class SimRobot:
         self._interp = builder.AddNamedSystem("desired_state", StateInterpolatorWithDiscreteDerivative(
             N_JOINTS, step, suppress_initial_transient=True))
         builder.Connect(self.checks.GetOutputPort("position"), self._interp.get_input_port())
-        builder.Connect(self._interp.get_output_port(), self.station.GetInputPort(JOINT_COMMAND_PORT))
+        self.guide, self._guide_source, self._guide_controller = guide, None, None
+        if guide is None:
+            builder.Connect(self._interp.get_output_port(), self.station.GetInputPort(JOINT_COMMAND_PORT))
+        else:
+            from drake_skill.station.controller import EndEffectorController
+            from drake_skill.station.pose_source import PoseTrajectorySource
+
+            self._guide_source = builder.AddNamedSystem("guide_plan", PoseTrajectorySource())
+            self._guide_controller = builder.AddNamedSystem("guide_controller", EndEffectorController(
+                station_config.controller, station_config.q_home))
+            builder.Connect(self._guide_source.GetOutputPort("X_WE_desired"),
+                            self._guide_controller.GetInputPort("X_WE_desired"))
+            builder.Connect(self._guide_controller.GetOutputPort("panda_state_desired"),
+                            self.station.GetInputPort(JOINT_COMMAND_PORT))
+            builder.Connect(self._guide_source.GetOutputPort("gripper_command"),
+                            self.station.GetInputPort("gripper_command"))
 
         # Status out.
         sender = builder.AddNamedSystem("status_sender", PandaStatusSender(N_JOINTS))
@@ -249,7 +269,8 @@ class SimRobot:
         hand = builder.AddNamedSystem("hand_receiver", SchunkWsgCommandReceiver(
             station_config.gripper_home, self.config.hand_force))
         builder.Connect(hand_sub.get_output_port(), hand.get_input_port())
-        builder.Connect(hand.GetOutputPort("position"), self.station.GetInputPort("gripper_command"))
+        if guide is None:
+            builder.Connect(hand.GetOutputPort("position"), self.station.GetInputPort("gripper_command"))
 
         # The ground truth, for the hardware station's object_state.
         if self.config.ground_truth_channel:
@@ -293,6 +314,15 @@ class SimRobot:
         self.X_WO = self.station.reset(self.context, seed)
         self._interp.set_initial_position(self._interp.GetMyMutableContextFromRoot(self.context),
                                           self.station.config.q_home)
+        if self.guide is not None:
+            from drake_skill.demos.demonstrator import DemonstratorConfig, humanlike_plan
+
+            home = self.station.GetOutputPort("ee_pose").Eval(self.station_context())
+            plan, _ = humanlike_plan(self.guide, self.X_WO, home, 0 if seed is None else int(seed),
+                                     DemonstratorConfig())
+            self._guide_source.set_plan(self._guide_source.GetMyMutableContextFromRoot(self.context), plan)
+            self._guide_controller.set_joint_positions(self.context, self.station.config.q_home)
+            self.guide_duration = plan.duration
         self.simulator.Initialize()
 
     @property
@@ -327,10 +357,8 @@ class SimRobot:
     def run(self, duration: float, seed: int | None = None) -> None:
         """Resets to ``seed`` and runs in real time in this thread for ``duration`` s (inf: until interrupted)."""
         self._prepare(seed)
-        if duration == float("inf"):
-            while True:
-                self.simulator.AdvanceTo(self.context.get_time() + 0.1)
-        self.simulator.AdvanceTo(float(duration))
+        while self.context.get_time() < duration:
+            self.simulator.AdvanceTo(min(self.context.get_time() + 0.1, float(duration)))
 
     def stop(self) -> None:
         """Stops the background thread (status and camera stop); re-raises its error."""

@@ -1,0 +1,225 @@
+"""``drake-skill hardware``: a skill on a real Panda through the drake-franka-driver's LCM.
+
+    drake-skill hardware run --skill DIR [--lcm-url URL] [--config hardware.yaml]
+                             [--rollouts 1] [--seed0 0] [--episodes E] [--out DIR] [--yes]
+    drake-skill hardware record-demo --skill open --out DIR [--lcm-url URL] [--config hardware.yaml]
+                             [--duration 15] [--seed 0] [--yes]
+
+The same diagram as in simulation, with the simulated station swapped for
+the hardware station (``drake_skill.station.hardware``): position commands
+on PANDA_COMMAND (wall-clock stamped, rate limited, the hand clipped to the
+workspace box, the first command the measured position), the status from
+PANDA_STATUS (no status for 100 ms stops it), the camera's images from
+DRAKE_RGBD_CAMERA_IMAGES. Start the driver first, e.g.
+``franka_driver --robot_ip_address=... --control_mode=position`` (or
+``drake-skill sim-robot`` to try it without a robot).
+
+run: executes the skill's greedy policy on ``--rollouts`` object poses
+(seeds ``seed0, seed0 + 1, ...``) with the rollout runner of simulation, or
+with ``--episodes E`` a learning run (``drake-skill learn``'s loop, every
+rollout on the robot; its output folder is ``--out``). Before every rollout
+it prints where to place the object and waits for Enter (a human resets the
+scene; ``--yes`` does not wait, e.g. against sim-robot, which does not reset
+itself). Prints a table and writes ``hardware_run.json`` in ``--out``.
+
+record-demo: records a kinesthetic demonstration: run the driver in a
+compliant mode (``--control_mode=torque``: with no command it holds the arm
+in gravity compensation and light damping; nothing is commanded from here),
+guide the arm by hand for ``--duration`` seconds; the measured hand pose at
+100 Hz and the segmented camera cloud at 10 Hz are written as the next
+``demo_NNN.npz`` of ``--out``. The demonstration format needs the object's
+state over time (lid angle / drawer travel): it is read from
+SIM_OBJECT_STATE (lcmt_scope), which sim-robot publishes; on a real robot a
+sensor on the hinge or slide must publish it there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+NAME = "hardware"
+HELP = "a skill on a real Panda over LCM: run (greedy or learning), record-demo (kinesthetic)"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from drake_skill.common import SKILLS
+
+    parser.description = __doc__
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", title="actions")
+    actions.required = True
+    run_p = actions.add_parser("run", help="the skill's greedy policy (or --episodes: learning) on the robot",
+                               description="Executes a skill on the robot with the simulation's rollout runner.")
+    run_p.add_argument("--skill", type=Path, required=True, help="a skill folder (drake-skill fit / learn)")
+    run_p.add_argument("--rollouts", type=int, default=1, help="greedy rollouts (default 1); per episode with --episodes")
+    run_p.add_argument("--seed0", type=int, default=0, help="object pose seed of the first rollout (default 0)")
+    run_p.add_argument("--episodes", type=int, default=0, help="policy-search episodes (default 0: greedy only)")
+    run_p.add_argument("--ground-truth-pose", action="store_true",
+                       help="object frame from the placed pose instead of the camera's segmenter")
+    run_p.add_argument("--out", type=Path, default=None, help="output folder (default SKILL/hardware_run)")
+    demo_p = actions.add_parser("record-demo", help="record a kinesthetic demonstration",
+                                description="Records the measured hand path and camera while a person guides the arm.")
+    demo_p.add_argument("--skill", choices=SKILLS, required=True, help="the skill demonstrated")
+    demo_p.add_argument("--out", type=Path, required=True, help="demonstration folder (demo_NNN.npz)")
+    demo_p.add_argument("--duration", type=float, default=15.0, help="recording length [s] (default 15)")
+    demo_p.add_argument("--seed", type=int, default=0, help="object pose seed: where to place it (default 0)")
+    demo_p.add_argument("--no-camera", action="store_true", help="record no perception")
+    for p in (run_p, demo_p):
+        p.add_argument("--lcm-url", default=None, help="LCM URL (default: the config's, or LCM's default)")
+        p.add_argument("--config", type=Path, help="HardwareConfig YAML (channels, URL, workspace, scenario)")
+        p.add_argument("--yes", action="store_true", help="do not wait for Enter before each rollout")
+
+
+def _prompt(enabled: bool):
+    """The reset hook: where to place the object; waits for Enter."""
+    if not enabled:
+        return None
+
+    def hook(seed, X_WO):
+        from pydrake.math import RollPitchYaw
+
+        x, y, _ = X_WO.translation()
+        yaw = RollPitchYaw(X_WO.rotation()).yaw_angle()
+        print(f"rollout seed {seed}: reset the scene; place the object's base at x = {x:.3f} m, "
+              f"y = {y:.3f} m, yaw = {math.degrees(yaw):.1f} deg; press Enter to start", flush=True)
+        input()
+
+    return hook
+
+
+def _run(args) -> int:
+    from drake_skill.cli.sim_robot import load_config
+    from drake_skill.fileio import atomic_write_json
+    from drake_skill.learning.rollout import RolloutConfig, RolloutRunner
+    from drake_skill.skill import Skill
+    from drake_skill.station.hardware import build_hardware_station
+
+    if args.rollouts < 1:
+        raise ValueError(f"--rollouts must be at least 1, got {args.rollouts}")
+    if args.episodes < 0:
+        raise ValueError(f"--episodes must be 0 (greedy only) or more, got {args.episodes}")
+    if not args.skill.is_dir():
+        raise NotADirectoryError(f"--skill {args.skill}: not a folder; give a skill folder (drake-skill fit --out)")
+    skill = Skill.load(args.skill)
+    config = load_config(args.config, args.lcm_url, skill.name)
+    camera = config.station.enable_camera
+    rollout = RolloutConfig(object_pose="perceived" if camera and not args.ground_truth_pose else "ground_truth",
+                            goal_model=camera)
+    out = args.out if args.out is not None else args.skill / "hardware_run"
+    station = build_hardware_station(config)
+    station.set_reset_hook(_prompt(not args.yes))
+    runner = RolloutRunner(skill, config=rollout, station=station)
+    print(f"hardware station on {config.lcm_url or '(LCM default)'}: status {config.status_channel}, "
+          f"commands {config.command_channel}" + (f", camera {config.camera_channel}" if camera else ""))
+    if args.episodes:
+        from drake_skill.learning.loop import LearnConfig, learn
+
+        outcome = learn(args.skill, out, LearnConfig(episodes=args.episodes, rollouts=args.rollouts,
+                                                     seed=args.seed0, held_out=0),
+                        station_config=config.station, rollout_config=rollout, runner=runner, replay=False)
+        print(f"wrote {out} ({outcome!r:.200})")
+        return 0
+    results = []
+    print(f"{'seed':>6} {'verdict':>8} {'return':>9} {'final state':>12} {'wall s':>7}  failure")
+    for i in range(args.rollouts):
+        result = runner.run(skill.initial_weights, args.seed0 + i)
+        results.append(result.summary())
+        final = "-" if not math.isfinite(result.final_object_state) else f"{result.final_object_state:.3f}"
+        print(f"{result.seed:>6} {str(result.verdict):>8} {result.dense_return:>9.1f} {final:>12} "
+              f"{result.wall_s:>7.1f}  {result.message[:80] if result.failed else ''}", flush=True)
+        if result.failed and ("StaleStatusError" in result.message or result.reason == "reflex"):
+            print("stopped: the robot's status stopped or its reflex fired", file=sys.stderr)
+            break
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_json(out / "hardware_run.json", {"skill": str(args.skill), "lcm_url": config.lcm_url,
+                                                  "rollouts": results})
+    print(f"wrote {out / 'hardware_run.json'}")
+    return 0 if results and not any(r["failed"] for r in results) else 1
+
+
+def _record_demo(args) -> int:
+    import numpy as np
+    from pydrake.math import RigidTransform
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import DiagramBuilder
+
+    from drake_skill.cli.sim_robot import load_config
+    from drake_skill.demos.demonstrator import demonstration_from
+    from drake_skill.demos.format import demo_path, existing_demo_files, save_demonstration
+    from drake_skill.station.hardware import build_hardware_station
+    from drake_skill.station.pose_source import PoseTrajectorySource, hold_plan
+    from drake_skill.station.simulation import StationRecorder
+
+    if not args.duration > 0:
+        raise ValueError(f"--duration must be positive, got {args.duration}")
+    if args.out.exists() and not args.out.is_dir():
+        raise NotADirectoryError(f"--out {args.out}: not a folder")
+    config = load_config(args.config, args.lcm_url, args.skill, camera=not args.no_camera)
+    if not config.ground_truth_channel:
+        raise ValueError("record-demo needs the object's state over time: set ground_truth_channel "
+                         "(a sensor on the hinge/slide, or sim-robot, publishes lcmt_scope there)")
+    builder = DiagramBuilder()
+    station = builder.AddNamedSystem("station", build_hardware_station(config, commanding=False))
+    hold = builder.AddNamedSystem("hold", PoseTrajectorySource())   # unused: nothing is commanded
+    builder.Connect(hold.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
+    builder.Connect(hold.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))
+    segmenter = None
+    if config.station.enable_camera:
+        from drake_skill.perception.systems import add_object_segmenter
+        segmenter = add_object_segmenter(builder, station)
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    simulator = Simulator(diagram, context)
+    simulator.set_target_realtime_rate(1.0)
+    station.set_reset_hook(_prompt(not args.yes))
+    X_WO_placed = station.reset(context, args.seed)
+    X_WE = station.GetOutputPort("ee_pose").Eval(station.GetMyContextFromRoot(context))
+    hold.set_plan(hold.GetMyMutableContextFromRoot(context), hold_plan(X_WE, config.station.gripper_home))
+    simulator.Initialize()
+    simulator.AdvanceTo(0.1)       # the status of now, not of the reset, in the first sample
+    frame_hz = float(config.station.camera.fps) if segmenter is not None else 10.0
+    recorder = StationRecorder(station, context, simulator, 100.0, frame_hz, segmenter)
+    recorder.anchor()
+    print(f"recording {args.duration:.0f} s: guide the arm now (Ctrl-C ends early)", flush=True)
+    n = int(math.ceil(args.duration * frame_hz - 1e-9)) * recorder.k + 1
+    grip = float(config.station.gripper_home)      # the hand's width is not read back
+    try:
+        for _ in range(n):
+            recorder.sample(grip)
+    except KeyboardInterrupt:
+        while not recorder.at_frame:
+            recorder.sample(grip)
+    obj = np.asarray(recorder.obj)
+    if not np.all(np.isfinite(obj)):
+        raise ValueError(f"no object state on {config.ground_truth_channel} during the recording: "
+                         "the demonstration format needs it (see drake-skill hardware --help)")
+    X_WO = X_WO_placed
+    if recorder.X_WO_perceived is not None:
+        from pydrake.common.eigen_geometry import Quaternion
+        v = np.asarray(recorder.X_WO_perceived, dtype=float)
+        X_WO = RigidTransform(Quaternion(v[3:] / np.linalg.norm(v[3:])), v[:3])
+    from drake_skill.station.success import judge_success
+    success = judge_success(args.skill, float(obj[-1]), config.station.success)
+    metadata = {"source": "kinesthetic", "lcm_url": config.lcm_url,
+                "X_WO_note": "X_OE uses the perceived X_WO at the first frame (the placed pose without a camera)"}
+    demo = demonstration_from(recorder, args.skill, args.seed, X_WO, success, metadata)
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = save_demonstration(demo, demo_path(args.out, len(existing_demo_files(args.out))))
+    print(f"wrote {path}: {demo.duration:.1f} s, final object state {demo.final_object_state:.3f}, "
+          f"{'success' if success else 'failure'}")
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    return _run(args) if args.action == "run" else _record_demo(args)
+
+
+def main(argv=None) -> int:
+    """Stand-alone entry (the dispatcher normally calls add_arguments / run)."""
+    parser = argparse.ArgumentParser(prog="drake-skill hardware")
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
