@@ -275,7 +275,7 @@ def _table_row(row: dict) -> str:
 def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_config=None,
           rollout_config=None, workers: int = 1, ray_address: str | None = None, use_ray: bool = False,
           resume: bool = False, force: bool = False, meshcat=None, replay: bool = True,
-          progress: bool = True, stop_after: int | None = None, log=None) -> LearnOutcome:
+          progress: bool = True, stop_after: int | None = None, log=None, runner=None) -> LearnOutcome:
     """Runs (or resumes) a learning run of the skill in ``skill_dir``; see the module docstring.
 
     station_config: the scenario (default ``scenario_for_skill``); rollout_config:
@@ -284,7 +284,9 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
     they do not change the numbers); meshcat: watch live (greedy executions
     run in this process then); replay: write the HTML replays; stop_after:
     return after this many episodes in this call (checkpointed; ``resume``
-    continues); log: a text stream for the tables (default stdout).
+    continues); log: a text stream for the tables (default stdout); runner: a
+    built RolloutRunner to run every rollout on (``workers`` = 1; e.g. on the
+    hardware station, ``drake-skill hardware run --episodes``).
     """
     from pydrake.common.yaml import yaml_dump_typed
 
@@ -350,6 +352,8 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
         if live:
             frame_meshcat_camera(view_meshcat, station_config_object_xyz(station_config))
     local_runner = viewer if (live and int(workers) == 1 and not (use_ray or ray_address)) else None
+    if runner is not None:                 # a given runner (the hardware station's): rollouts run on it
+        local_runner = runner
     pool = make_pool(spec, workers, ray_address, use_ray, runner=local_runner)
     wall_start = time.perf_counter()
 
