@@ -6,27 +6,33 @@ One process. A skill is fitted first (scripted demonstrations,
 ``drake_skill.demos.demonstrator.ScriptedDemonstrator`` with a fixed seed, then
 ``drake_skill.skill.fit_skill``) and cached under ``--cache`` (default
 ``results/bench_rollout/``), so the benchmark runs on a fresh clone; a second
-run loads it. Then the skill's initial DMP is executed twice from the same
-object pose (ground-truth X_WO, so both runs move the same way):
+run loads it. Then the skill's initial weights are executed from the same
+object pose by the rollout runner policy search uses
+(``drake_skill.learning.rollout.RolloutRunner``, with its per-step collision
+reflex monitor):
 
-- ``rtf_plant``: the rollout diagram (station, DMP, controllers) built with
-  the camera off and no perception systems;
+- ``rtf_plant``: the same diagram with the perception systems removed
+  (ground-truth object frame, no goal pipeline) and the camera built but
+  never rendered; ``rtf_plant_no_camera``: the same without the camera (a
+  renderer in the scene costs a little every plant step: it is sent the
+  geometry poses);
 - ``rtf_full``: the whole chain, station + DMP + camera at 10 Hz + object
-  segmenter + PCAE featurizer + POMRP reward (``add_goal_pipeline``);
+  segmenter (object frame perceived on the first frame) + PCAE featurizer +
+  POMRP reward (``add_goal_pipeline``);
 - ``ratio`` = ``rtf_full / rtf_plant`` (the issue asks >= 0.4).
 
-Real-time factor = simulated s / wall s, over the whole rollout
-(``tau`` + 1 s settle) after a short warm-up (the renderer's first frame).
+Real-time factor = simulated s / wall s, over the whole rollout (``tau`` +
+the settle time), after a short warm-up (the renderer's first frame).
 The breakdown (``breakdown_ms_per_s``: ms of wall time per simulated second)
-is measured in the full run itself: at each camera instant the benchmark
-evaluates, in order, the images the segmenter's cloud is made from
-(``render``), the cloud (``cloud``) and the segmenter's frame
-(``segmentation``) before the simulator processes that instant's events
-(which then reuse the cached values, so nothing is computed twice for the
-benchmark); the featurizer's and the reward's periodic updates are timed
-around their callbacks (``encoding``, ``reward``); ``plant`` is the rest
-(MultibodyPlant, controllers, DMP, simulator). ``plant_only`` is the same
-figure from the ``rtf_plant`` run.
+is measured in the full run itself, by timing the perception systems'
+callbacks (patched on their classes for the run, exclusive of what they
+call): when the segmenter reads its cloud, the images it is made from are
+evaluated first (``render``), then the cloud (``cloud``), both then cached
+for the segmenter; the segmentation of the frame (``segmentation``), the
+featurizer's update (``encoding``: PCAE and PCA) and the reward's
+(``reward``); ``plant`` is the rest (MultibodyPlant, controllers, DMP,
+reflex monitor, simulator). ``plant_only`` is the same figure from the
+``rtf_plant`` run. ``calls_per_frame`` counts each part per camera frame.
 """
 
 import os
@@ -99,82 +105,34 @@ class _Timers:
         return lambda: setattr(cls, method, original)
 
 
-def _build(skill, with_perception: bool):
-    from pydrake.systems.analysis import Simulator
-    from pydrake.systems.framework import DiagramBuilder
-    from pydrake.systems.primitives import ConstantVectorSource
-
-    from drake_skill.action.systems import DmpSystem
-    from drake_skill.learning.rollout import ObjectPoseSource
-    from drake_skill.reward.systems import add_goal_pipeline
-    from drake_skill.station.builder import build_station
+def _runner(skill, perception: bool, camera: bool = True):
+    """The rollout runner of ``drake_skill.learning.rollout``: the whole chain (object frame
+    perceived, goal pipeline), or the plant alone (ground-truth object frame, no
+    perception systems; the camera built but never rendered, or not built)."""
+    from drake_skill.learning.rollout import RolloutConfig, RolloutRunner
     from drake_skill.station.config import scenario_for_skill
 
-    config = scenario_for_skill(skill.name)
-    config.enable_camera = with_perception
-    builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", build_station(config))
-    pose = builder.AddNamedSystem("object_pose", ObjectPoseSource())
-    dmp = builder.AddNamedSystem("dmp", DmpSystem(skill.initial_dmp, skill.config.dmp))
-    gripper = builder.AddNamedSystem("gripper", ConstantVectorSource([0.0]))
-    builder.Connect(pose.GetOutputPort("X_WO"), dmp.get_X_WO_input_port())
-    builder.Connect(dmp.get_X_WE_desired_output_port(), station.GetInputPort("ee_pose_desired"))
-    builder.Connect(gripper.get_output_port(), station.GetInputPort("gripper_command"))
-    pipeline = add_goal_pipeline(builder, station, skill) if with_perception else None
-    diagram = builder.Build()
-    context = diagram.CreateDefaultContext()
-    return dict(station=station, pose=pose, dmp=dmp, pipeline=pipeline, diagram=diagram,
-                context=context, simulator=Simulator(diagram, context))
+    station_config = scenario_for_skill(skill.name)
+    station_config.enable_camera = camera
+    config = RolloutConfig(object_pose="perceived" if perception else "ground_truth", goal_model=perception)
+    return RolloutRunner(skill, station_config, config)
 
 
-def _reset(rig, skill, seed: int) -> float:
-    """Defaults, object pose from ``seed``, DMP start at the hand; returns the rollout duration [s]."""
-    from drake_skill.station.simulation import pose_to_vector
-
-    diagram, context, station, dmp = rig["diagram"], rig["context"], rig["station"], rig["dmp"]
-    diagram.SetDefaultContext(context)
-    context.SetTime(0.0)
-    X_WO = station.reset(context, seed)
-    rig["pose"].set_pose(rig["pose"].GetMyMutableContextFromRoot(context), X_WO)
-    dmp_context = dmp.GetMyMutableContextFromRoot(context)
-    dmp.set_weights(dmp_context, skill.initial_weights)
-    X_WE = station.GetOutputPort("ee_pose").Eval(station.GetMyContextFromRoot(context))
-    y0 = pose_to_vector(X_WO.inverse() @ X_WE)
-    goal = dmp.get_dmp(dmp_context).goal
-    if np.dot(y0[3:], goal[3:]) < 0:
-        y0[3:] *= -1
-    dmp.set_start_goal(dmp_context, y0, goal)
-    rig["simulator"].Initialize()
-    return dmp.get_dmp(dmp_context).tau + 1.0
-
-
-def _run(rig, skill, seed: int, timers: _Timers | None, warmup_s: float = 0.3) -> dict:
-    """One rollout; returns its wall time, duration, return and verdict."""
-    simulator, context, station = rig["simulator"], rig["context"], rig["station"]
-    pipeline = rig["pipeline"]
-    # Warm-up (first render, first encode), then the timed rollout from a fresh reset.
-    _reset(rig, skill, seed)
-    simulator.AdvanceTo(warmup_s)
-    duration = _reset(rig, skill, seed)
+def _run(runner, skill, seed: int, timers: "_Timers | None" = None, warmup_s: float = 0.3) -> dict:
+    """One rollout of the skill's initial weights (after a short warm-up: the renderer's
+    first frame, the first encoding); returns its wall time, simulated time, return, verdict."""
+    runner.reset(skill.initial_weights, seed)
+    runner.simulator.AdvanceTo(warmup_s)
     if timers is not None:
         timers.total.clear()
         timers.calls.clear()
-    period = 0.1 if pipeline is None else pipeline.segmenter.config.period_s
-    n = int(np.ceil(duration / period - 1e-9))
-    station_context = station.GetMyContextFromRoot(context)
-    start = time.perf_counter()
-    simulator.AdvanceTo(n * period)
-    simulator.AdvancePendingEvents()       # the last camera frame
-    wall = time.perf_counter() - start
-    simulated = n * period
-    out = {"wall_s": wall, "simulated_s": simulated, "rtf": simulated / wall}
-    if pipeline is not None:
-        reward_context = pipeline.reward.GetMyContextFromRoot(context)
-        out["return"] = float(pipeline.reward.smoothed_return(reward_context))
-        out["verdict"] = bool(pipeline.reward.verdict(reward_context))
-        out["frames"] = int(len(pipeline.reward.goal_sequence(reward_context)))
-    out["final_object_state"] = float(station.GetOutputPort("object_state").Eval(station_context)[0])
-    return out
+    result = runner.run(skill.initial_weights, seed)
+    if result.failed:
+        raise RuntimeError(f"the benchmark rollout failed ({result.reason}): {result.message}")
+    simulated = float(result.times[-1] - result.times[0])
+    return {"wall_s": result.wall_s, "simulated_s": simulated, "rtf": simulated / result.wall_s,
+            "return": result.dense_return, "verdict": result.verdict, "frames": len(result.rewards),
+            "final_object_state": result.final_object_state, "success": result.success}
 
 
 def _perception_ports(station, pipeline) -> dict:
@@ -201,8 +159,8 @@ def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Pa
     from drake_skill.reward.systems import PomrpReward
 
     skill = fitted_skill(skill_name, seed, cache, progress)
-    plant_rig = _build(skill, with_perception=False)
-    plant = _run(plant_rig, skill, object_seed, None)
+    plant = _run(_runner(skill, perception=False), skill, object_seed)
+    no_camera = _run(_runner(skill, perception=False, camera=False), skill, object_seed)
 
     timers = _Timers()
     rig = {}
@@ -225,9 +183,10 @@ def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Pa
             timers.wrap(PcaeFeaturizer, "_update_frame", "encoding"),
             timers.wrap(PomrpReward, "_update", "reward")]
     try:
-        full_rig = _build(skill, with_perception=True)
-        rig.update(full_rig, ports=_perception_ports(full_rig["station"], full_rig["pipeline"]))
-        full = _run(full_rig, skill, object_seed, timers)
+        runner = _runner(skill, perception=True)
+        rig.update(station=runner.station, context=runner.context,
+                   ports=_perception_ports(runner.station, runner.pipeline))
+        full = _run(runner, skill, object_seed, timers)
     finally:
         for u in undo:
             u()
@@ -235,25 +194,24 @@ def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Pa
     parts["plant"] = full["wall_s"] - sum(parts.values())
     per_s = {k: round(1e3 * v / full["simulated_s"], 2) for k, v in parts.items()}
     per_s["plant_only"] = round(1e3 * plant["wall_s"] / plant["simulated_s"], 2)
-    frames = full["simulated_s"] * skill_fps(full_rig) + 1
+    frames = max(1, timers.calls.get("encoding", 1))
+    window = runner.station.object_camera.window
     return {
         "skill": skill_name, "skill_seed": seed, "object_seed": object_seed,
         "simulated_s": round(full["simulated_s"], 3),
         "rtf_plant": round(plant["rtf"], 3), "rtf_full": round(full["rtf"], 3),
         "ratio": round(full["rtf"] / plant["rtf"], 3), "ratio_required": RATIO_REQUIRED,
+        "rtf_plant_no_camera": round(no_camera["rtf"], 3),
         "breakdown_ms_per_s": per_s,
         "per_frame_ms": {k: round(1e3 * parts[k] / frames, 2)
                          for k in ("render", "cloud", "segmentation", "encoding", "reward")},
         "calls_per_frame": {k: round(v / frames, 2) for k, v in timers.calls.items()},
+        "object_camera": {"x0": window.x0, "y0": window.y0, "width": window.width, "height": window.height},
         "return": round(full["return"], 4), "verdict": full["verdict"], "goal_frames": full["frames"],
-        "final_object_state": round(full["final_object_state"], 4),
+        "final_object_state": round(full["final_object_state"], 4), "success": full["success"],
         "final_object_state_plant": round(plant["final_object_state"], 4),
         "load_average": [round(v, 2) for v in os.getloadavg()],
     }
-
-
-def skill_fps(rig) -> float:
-    return 1.0 / rig["pipeline"].segmenter.config.period_s
 
 
 def main(argv=None) -> int:

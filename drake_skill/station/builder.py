@@ -275,13 +275,16 @@ class Station(Diagram):
         cam = self.config.camera        # Drake's CameraConfig: intrinsics, clipping, depth range, X_PB
         renderer = cam.renderer_class if isinstance(cam.renderer_class, RenderEngineVtkParams) \
             else RenderEngineVtkParams(backend="EGL")
-        self.scene_graph.AddRenderer(cam.renderer_name, MakeRenderEngineVtk(renderer))
+        # The cameras render a scene of their own (drake_skill/station/camera.py): the
+        # plant's SceneGraph then carries no renderer to update at every step.
+        from drake_skill.station.camera import add_object_camera, add_render_scene
+        self.render_scene = add_render_scene(builder, self, cam.renderer_name, MakeRenderEngineVtk(renderer))
         color, depth = cam.MakeCameras()
         info = color.core().intrinsics()
         world_id = self.plant.GetBodyFrameIdOrThrow(self.plant.world_body().index())
         self._X_WC = cam.X_PB.GetDeterministicValue()
         sensor = builder.AddNamedSystem("camera", RgbdSensor(world_id, self._X_WC, color, depth))
-        builder.Connect(self.scene_graph.get_query_output_port(), sensor.query_object_input_port())
+        builder.Connect(self.render_scene.get_query_output_port(), sensor.query_object_input_port())
         # Rendering is on demand: an image or the cloud is rendered when a
         # consumer evaluates it, once per state (the sensor caches it), so the
         # camera costs nothing between the frames the perception systems sample
@@ -304,7 +307,6 @@ class Station(Diagram):
         self.camera_info = info
         # The perception systems read the crop of this camera where the object can
         # appear (object_point_cloud etc.; drake_skill/station/camera.py).
-        from drake_skill.station.camera import add_object_camera
         self.object_camera = add_object_camera(builder, self, color, depth, world_id, self._X_WC)
 
     def camera_pose(self) -> RigidTransform:

@@ -36,6 +36,18 @@ is a linear-fractional function of the base translation, extreme at the
 ends of the translation ranges; yaw and joint are sampled finely enough
 that the margin covers what lies between samples.)
 
+**The render scene** (:func:`add_render_scene`). A renderer registered with
+the plant's own SceneGraph is sent every geometry's pose at every plant step
+(SceneGraph updates its render engines whenever the contact query updates
+the poses), although the cameras render at 10 Hz. The cameras therefore
+render a second SceneGraph holding only the perception geometry: each of the
+plant's perception geometries is registered there again (same shape, pose in
+its body frame and perception properties, hence the same colours and
+labels), on one frame per body, and a small system turns the plant's body
+poses into that scene's frame poses. It is evaluated only when a camera
+renders, so the plant's steps carry no rendering cost; the images are those
+of the plant's scene.
+
 Ports the station exports from this camera (rendered on demand, like the
 full-frame ones): ``object_point_cloud`` (PointCloud, world frame, xyz + rgb,
 organised ``height' x width'``), ``object_color_image``,
@@ -49,15 +61,27 @@ import dataclasses as dc
 import math
 
 import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.geometry import CalcObb, ColorRenderCamera, DepthRenderCamera, RenderCameraCore, Role
+from pydrake.common.value import AbstractValue, Value
+from pydrake.geometry import (
+    CalcObb,
+    ColorRenderCamera,
+    DepthRenderCamera,
+    FramePoseVector,
+    GeometryFrame,
+    GeometryInstance,
+    RenderCameraCore,
+    Role,
+    SceneGraph,
+)
+from pydrake.systems.framework import LeafSystem
 from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.tree import BodyIndex
 from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.primitives import ConstantValueSource
 from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
 
-__all__ = ["CropWindow", "ObjectCamera", "add_object_camera", "crop_camera_info", "crop_window",
-           "object_swept_points"]
+__all__ = ["CropWindow", "ObjectCamera", "add_object_camera", "add_render_scene", "crop_camera_info",
+           "crop_window", "object_swept_points"]
 
 MARGIN_PX = 6
 """Pixels added on every side of the swept volume's projection."""
@@ -96,6 +120,60 @@ class ObjectCamera:
     image_port_names: tuple[str, str] = ("object_color_image", "object_depth_image")
     cloud_port_name: str = "object_point_cloud"
     label_port_name: str = "object_label_image"
+
+
+class _RenderPoses(LeafSystem):
+    """Output ``frame_poses`` (FramePoseVector of the render scene's frames): the
+    plant's body poses X_WB (input ``body_poses``) of the bodies the frames stand for."""
+
+    def __init__(self, frames: list[tuple[object, int]]):
+        super().__init__()
+        self._frames = frames                       # (render-scene FrameId, body index)
+        self._poses = self.DeclareAbstractInputPort("body_poses", Value([RigidTransform()]))
+        self.DeclareAbstractOutputPort("frame_poses", lambda: Value(FramePoseVector()), self._calc,
+                                       {self.all_input_ports_ticket()})
+
+    def _calc(self, context, output):
+        X_WB = self._poses.Eval(context)
+        poses = output.get_mutable_value()
+        poses.clear()
+        for frame_id, body in self._frames:
+            poses.set_value(frame_id, X_WB[body])
+
+
+def add_render_scene(builder, station, renderer_name: str, render_engine) -> SceneGraph:
+    """Adds the render scene (see the module docstring) of ``station``'s plant, with
+    ``render_engine`` registered as ``renderer_name``; returns its SceneGraph, whose
+    query port the cameras read. Call after the plant is finalised."""
+    plant, inspector = station.plant, station.scene_graph.model_inspector()
+    scene = builder.AddNamedSystem("render_scene", SceneGraph())
+    scene.AddRenderer(renderer_name, render_engine)
+    source = scene.RegisterSource("station_perception_geometry")
+    world = plant.GetBodyFrameIdOrThrow(plant.world_body().index())
+    frames = []
+    for i in range(plant.num_bodies()):
+        body = plant.get_body(BodyIndex(i))
+        plant_frame = plant.GetBodyFrameIdIfExists(body.index())
+        if plant_frame is None:
+            continue
+        geometries = inspector.GetGeometries(plant_frame, Role.kPerception)
+        if not geometries:
+            continue
+        frame = None
+        if plant_frame != world:
+            frame = scene.RegisterFrame(source, GeometryFrame(f"{body.name()}_{i}"))
+            frames.append((frame, i))
+        for g in geometries:
+            instance = GeometryInstance(inspector.GetPoseInFrame(g), inspector.GetShape(g), inspector.GetName(g))
+            instance.set_perception_properties(inspector.GetPerceptionProperties(g))
+            if frame is None:
+                scene.RegisterAnchoredGeometry(source, instance)
+            else:
+                scene.RegisterGeometry(source, frame, instance)
+    poses = builder.AddNamedSystem("render_scene_poses", _RenderPoses(frames))
+    builder.Connect(plant.get_body_poses_output_port(), poses.get_input_port())
+    builder.Connect(poses.get_output_port(), scene.get_source_pose_port(source))
+    return scene
 
 
 def crop_camera_info(info: CameraInfo, window: CropWindow) -> CameraInfo:
@@ -191,7 +269,9 @@ def add_object_camera(builder, station, color_camera: ColorRenderCamera, depth_c
 
     ``station`` is the Station being built (its plant finalised): the window comes
     from its object and ``station.config.object``; the camera must be fixed in the
-    world (``parent_id`` the world frame), as the window is computed once.
+    world (``parent_id`` the world frame), as the window is computed once. It
+    renders ``station.render_scene`` (:func:`add_render_scene`) when the station
+    has one, else the plant's SceneGraph.
     """
     full = color_camera.core().intrinsics()
     world_id = station.plant.GetBodyFrameIdOrThrow(station.plant.world_body().index())
@@ -208,7 +288,8 @@ def add_object_camera(builder, station, color_camera: ColorRenderCamera, depth_c
                                                depth_camera.core().sensor_pose_in_camera_body()),
                               depth_camera.depth_range())
     sensor = builder.AddNamedSystem("object_camera", RgbdSensor(parent_id, X_PC, color, depth))
-    builder.Connect(station.scene_graph.get_query_output_port(), sensor.query_object_input_port())
+    scene = getattr(station, "render_scene", None) or station.scene_graph
+    builder.Connect(scene.get_query_output_port(), sensor.query_object_input_port())
     to_cloud = builder.AddNamedSystem("object_depth_to_cloud", DepthImageToPointCloud(
         info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
     builder.Connect(sensor.depth_image_32F_output_port(), to_cloud.depth_image_input_port())
