@@ -44,15 +44,21 @@ def initial_skill(skill: str, out: Path, quiet: bool) -> Path:
     return directory
 
 
-def one_run(skill_dir: Path, out: Path, seed: int, workers: int, log) -> dict:
+def one_run(skill_dir: Path, out: Path, seed: int, args, log) -> dict:
     from drake_skill.learning.loop import LearnConfig, learn
+    from drake_skill.skill import Skill
+    from drake_skill.station.config import load_station_config, scenario_for_skill
 
     if (out / "summary.json").is_file():
         return json.loads((out / "summary.json").read_text())
     resume = (out / "checkpoint" / "state.json").is_file()
+    station = scenario_for_skill(Skill.load(skill_dir).name)
+    if args.station_config is not None:
+        station = load_station_config(args.station_config, defaults=station)
+    config = LearnConfig(seed=seed, episodes=args.episodes, rollouts=args.rollouts, held_out=args.held_out)
     start = time.perf_counter()
-    outcome = learn(skill_dir, out, LearnConfig(seed=seed), workers=workers, resume=resume, replay=False,
-                    progress=False, log=log)
+    outcome = learn(skill_dir, out, config, station_config=station, workers=args.workers, resume=resume,
+                    replay=False, progress=False, log=log)
     summary = dict(outcome.summary)
     summary["wall_s"] = round(time.perf_counter() - start, 1)
     return summary
@@ -65,6 +71,12 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=5, help="learning runs per skill (seeds 0..N-1)")
     parser.add_argument("--workers", type=int, default=2, help="rollout worker processes per run")
     parser.add_argument("--out", type=Path, default=Path("results") / "check_learning")
+    smoke = parser.add_argument_group("smoke test (not the check: the issue's figures use the defaults)")
+    smoke.add_argument("--skill-dir", type=Path, help="start every run from this fitted skill")
+    smoke.add_argument("--station-config", type=Path, help="StationConfig YAML")
+    smoke.add_argument("--episodes", type=int, default=5)
+    smoke.add_argument("--rollouts", type=int, default=6)
+    smoke.add_argument("--held-out", type=int, default=10)
     args = parser.parse_args(argv)
 
     import numpy as np
@@ -74,20 +86,21 @@ def main(argv=None) -> int:
     log = io.StringIO() if args.json else sys.stdout
     report = {}
     for skill in args.skills:
-        skill_dir = initial_skill(skill, args.out, args.json)
+        skill_dir = args.skill_dir or initial_skill(skill, args.out, args.json)
         runs = []
         for seed in range(args.seeds):
             if not args.json:
                 print(f"--- {skill}, seed {seed}")
-            s = one_run(skill_dir, args.out / skill / f"seed{seed}", seed, args.workers, log)
+            s = one_run(skill_dir, args.out / skill / f"seed{seed}", seed, args, log)
             runs.append({"seed": seed, "before": s["held_out_before"], "after": s["held_out_after"],
                          "greedy_success": s["greedy_success"], "failures": s["failures"],
                          "wall_s": s.get("wall_s")})
         report[skill] = {"before": float(np.mean([r["before"] for r in runs])),
                          "after": float(np.mean([r["after"] for r in runs])), "runs": runs}
     report["required"] = {"before_max": BEFORE_MAX, "after_min": AFTER_MIN}
-    report["settings"] = {"method": "pi2-es-cov", "reward": "dense", "weighting": "thesis", "episodes": 5,
-                          "rollouts": 6, "held_out_poses": 10, "seeds": args.seeds}
+    report["settings"] = {"method": "pi2-es-cov", "reward": "dense", "weighting": "thesis",
+                          "episodes": args.episodes, "rollouts": args.rollouts, "held_out_poses": args.held_out,
+                          "seeds": args.seeds, "workers": args.workers}
     report["passed"] = all(report[s]["before"] <= BEFORE_MAX and report[s]["after"] >= AFTER_MIN
                            for s in args.skills)
     atomic_write_json(args.out / "check_learning.json", report)
