@@ -253,7 +253,7 @@ class Skill:
         if not directory.exists():
             aside = fileio.interrupted_swap(directory)
             hint = f"; an interrupted save left the previous skill in {aside[-1]}" if aside else ""
-            raise FileNotFoundError(f"{directory}: no such skill folder{hint}")
+            raise FileNotFoundError(f"{directory}: no such skill folder (no skill.json){hint}")
         if not directory.is_dir():
             raise NotADirectoryError(f"{directory}: not a folder; expected a skill folder written by Skill.save")
         meta_path = directory / "skill.json"
