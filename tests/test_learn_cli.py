@@ -31,8 +31,9 @@ def test_learn_writes_every_artifact(learned, capsys):
     assert [c["episode"] for c in summary["curve"]] == [0, 1]
     assert summary["n_rollouts"] == 2 and 0.0 <= summary["held_out_after"] <= 1.0
     records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
-    assert [r["type"] for r in records] == ["held_out", "greedy", "rollout", "rollout", "greedy", "episode",
-                                           "held_out"]
+    assert [r["type"] for r in records] == ["held_out", "greedy", "episode", "rollout", "rollout", "greedy",
+                                           "episode", "held_out"]
+    assert [r["episode"] for r in records if r["type"] == "episode"] == [0, 1]
     for r in records:
         if r["type"] == "rollout":
             assert set(r) >= {"seed", "failed", "reason", "dense_return", "verdict", "success", "wall_s",

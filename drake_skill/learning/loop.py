@@ -319,7 +319,7 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
                              f"({', '.join(changed)} differ); use the same options or another --out")
         search = policy_search_from_state(load_npz(checkpoint / "search.npz"))
         records, curve = state["records"], state["curve"]
-        held_out_before = state.get("held_out_before")
+        held_out_before, pending = state.get("held_out_before"), state.get("pending")
         _print(f"resuming {out_dir} after episode {search.episode} of {config.episodes}", file=stream)
     else:
         if (checkpoint / "state.json").exists() and not force:
@@ -332,7 +332,7 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
         atomic_write_json(out_dir / "config.json", run_config)
         search = make_policy_search(config.method, skill.initial_weights, skill.sigma0,
                                     **config.search_options())
-        records, curve, held_out_before = [], [], None
+        records, curve, held_out_before, pending = [], [], None, None
     per_step = config.method in PER_STEP_METHODS
     weighting = search.state_dict().get("option_weighting")   # the method's default when not given
     weighting = None if weighting is None else str(weighting)
@@ -361,21 +361,12 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
         from tqdm import tqdm
         return tqdm(total=total, desc=desc, unit="rollout", disable=not progress, leave=False, file=sys.stderr)
 
-    def greedy(episode: int) -> dict:
-        seed = pose_seed(config.seed, episode, None)
-        path = None
+    def greedy_path(episode: int) -> Path | None:
         if replay and episode == 0:
-            path = out_dir / "replay_first.html"
-        elif replay and episode == config.episodes:
-            path = out_dir / "replay_last.html"
-        mean = search.mean
-        if viewer is not None and (live or path is not None):
-            result = replayer.run(viewer, mean, seed, path)
-        else:
-            result = pool.run(mean, seed)
-        record = {"type": "greedy", "episode": episode, **result.summary()}
-        records.append(record)
-        return record
+            return out_dir / "replay_first.html"
+        if replay and episode == config.episodes:
+            return out_dir / "replay_last.html"
+        return None
 
     def held_out(phase: str) -> dict | None:
         if config.held_out <= 0:
@@ -397,58 +388,76 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
         atomic_save_npz(checkpoint / "search.npz", {k: np.asarray(v) for k, v in state.items()})
         atomic_write_json(checkpoint / "state.json", {
             "format": _CHECKPOINT_FORMAT, "episode": search.episode, "records": records, "curve": curve,
-            "held_out_before": held_out_before})
+            "held_out_before": held_out_before, "pending": pending})
         atomic_write_text(out_dir / "results.jsonl", _jsonl(records))
 
     try:
         if not resume:
             held_out_before = held_out("before")
-            g = greedy(0)
-            row = {"episode": 0, "greedy_success": g["success"], "greedy_return": g["dense_return"],
-                   "greedy_verdict": g["verdict"], "mean_return": None, "best_return": None,
-                   "exploration": exploration_size(search), "failures": {}}
-            curve.append(row)
+            # Episode 0: the greedy execution before learning is still to run.
+            pending = {"episode": 0, "mean_return": None, "best_return": None,
+                       "exploration": exploration_size(search), "failures": {}}
+            save_checkpoint()
             _print(f"{skill.name}: {config.method}, {config.reward} reward, weighting {weighting or '-'}, "
                    f"{config.episodes} episodes x {config.rollouts} rollouts, {pool.n_workers} worker(s)",
                    file=stream)
-            _print(_table_header(), file=stream)
+        _print(_table_header(), file=stream)
+        for row in curve:
             _print(_table_row(row), file=stream)
-            save_checkpoint()
-        else:
-            _print(_table_header(), file=stream)
-            for row in curve:
-                _print(_table_row(row), file=stream)
         ran = 0
-        while search.episode < config.episodes:
-            if stop_after is not None and ran >= stop_after:
+        # Each batch: the greedy execution of the last update (pending) together
+        # with the next episode's rollouts; both need only that update, so the
+        # workers run them side by side. A checkpoint follows every update.
+        while pending is not None or search.episode < config.episodes:
+            rollouts_now = search.episode < config.episodes
+            if rollouts_now and stop_after is not None and ran >= stop_after:
                 return LearnOutcome({"interrupted_after_episode": search.episode}, out_dir, False, search)
-            episode = search.episode + 1
-            exploration = exploration_size(search)
-            samples = search.ask(config.rollouts)
-            seeds = [pose_seed(config.seed, episode, c) for c in range(config.rollouts)]
-            b = bar(len(seeds), f"episode {episode}/{config.episodes}")
+            tasks, greedy_result = [], None
+            if pending is not None:
+                g_episode = pending["episode"]
+                g_seed = pose_seed(config.seed, g_episode, None)
+                path = greedy_path(g_episode)
+                if viewer is not None and (live or path is not None):
+                    greedy_result = replayer.run(viewer, search.mean, g_seed, path)
+                else:
+                    tasks.append((search.mean, g_seed))
+            if rollouts_now:
+                episode = search.episode + 1
+                exploration = exploration_size(search)
+                samples = search.ask(config.rollouts)
+                seeds = [pose_seed(config.seed, episode, c) for c in range(config.rollouts)]
+                tasks += list(zip(samples, seeds))
+            desc = f"episode {search.episode + 1}/{config.episodes}" if rollouts_now else "greedy"
+            b = bar(len(tasks), desc)
             try:
-                results = pool.map(list(zip(samples, seeds)), lambda i, r: b.update(1))
+                results = pool.map(tasks, lambda i, r: b.update(1)) if tasks else []
             finally:
                 b.close()
-            values = episode_rewards(results, config.reward, per_step)
-            search.tell(samples, values)
-            returns = episode_rewards(results, config.reward, False)
-            for c, r in enumerate(results):
-                records.append({"type": "rollout", "episode": episode, "index": c,
-                                "reward": float(returns[c]), **r.summary()})
-            g = greedy(episode)
-            failures = dict(Counter(r.reason for r in results if r.failed))
-            row = {"episode": episode, "greedy_success": g["success"], "greedy_return": g["dense_return"],
-                   "greedy_verdict": g["verdict"], "mean_return": float(np.mean(returns)),
-                   "best_return": float(np.max(returns)), "exploration": exploration, "failures": failures,
-                   "rollout_successes": int(sum(r.success for r in results)),
-                   "ik_warnings": int(sum(r.ik_warnings for r in results))}
-            curve.append(row)
-            records.append({"type": "episode", **row})
-            _print(_table_row(row), file=stream)
+            if pending is not None:
+                if greedy_result is None:
+                    greedy_result, results = results[0], results[1:]
+                g = {"type": "greedy", "episode": pending["episode"], **greedy_result.summary()}
+                records.append(g)
+                row = {**pending, "greedy_success": g["success"], "greedy_return": g["dense_return"],
+                       "greedy_verdict": g["verdict"]}
+                curve.append(row)
+                records.append({"type": "episode", **row})
+                _print(_table_row(row), file=stream)
+                pending = None
+            if rollouts_now:
+                values = episode_rewards(results, config.reward, per_step)
+                search.tell(samples, values)
+                returns = episode_rewards(results, config.reward, False)
+                for c, r in enumerate(results):
+                    records.append({"type": "rollout", "episode": episode, "index": c,
+                                    "reward": float(returns[c]), **r.summary()})
+                pending = {"episode": episode, "mean_return": float(np.mean(returns)),
+                           "best_return": float(np.max(returns)), "exploration": exploration,
+                           "failures": dict(Counter(r.reason for r in results if r.failed)),
+                           "rollout_successes": int(sum(r.success for r in results)),
+                           "ik_warnings": int(sum(r.ik_warnings for r in results))}
+                ran += 1
             save_checkpoint()
-            ran += 1
 
         held_out_after = held_out("after")
         atomic_write_text(out_dir / "results.jsonl", _jsonl(records))
