@@ -428,11 +428,13 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
                 seeds = [pose_seed(config.seed, episode, c) for c in range(config.rollouts)]
                 tasks += list(zip(samples, seeds))
             desc = f"episode {search.episode + 1}/{config.episodes}" if rollouts_now else "greedy"
-            b = bar(len(tasks), desc)
-            try:
-                results = pool.map(tasks, lambda i, r: b.update(1)) if tasks else []
-            finally:
-                b.close()
+            results = []
+            if tasks:
+                b = bar(len(tasks), desc)
+                try:
+                    results = pool.map(tasks, lambda i, r: b.update(1))
+                finally:
+                    b.close()
             if pending is not None:
                 if greedy_result is None:
                     greedy_result, results = results[0], results[1:]
