@@ -36,7 +36,6 @@ sensor on the hinge or slide must publish it there.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -131,6 +130,8 @@ def _run(args) -> int:
         final = "-" if not math.isfinite(result.final_object_state) else f"{result.final_object_state:.3f}"
         print(f"{result.seed:>6} {str(result.verdict):>8} {result.dense_return:>9.1f} {final:>12} "
               f"{result.wall_s:>7.1f}  {result.message[:80] if result.failed else ''}", flush=True)
+        if result.failed and "StaleStatusError" in result.message and len(results) == 1:
+            raise ConnectionError(result.message.replace("StaleStatusError: ", ""))   # no driver: a user error
         if result.failed and ("StaleStatusError" in result.message or result.reason == "reflex"):
             print("stopped: the robot's status stopped or its reflex fired", file=sys.stderr)
             break

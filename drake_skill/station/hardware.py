@@ -9,7 +9,7 @@ hold (docs/architecture.md, "One diagram per skill execution"; the pattern of
 
     ee_pose_desired --> [workspace clip] --> [EndEffectorController] --q--> [command encoder] --> LCM PANDA_COMMAND
     gripper_command --> [SchunkWsgCommandSender] --> LCM PANDA_HAND_COMMAND
-    LCM PANDA_STATUS --> [PandaStatusReceiver] --> panda_state, ee_pose (forward kinematics), torque_external
+    LCM PANDA_STATUS --> [PandaStatusReceiver] --> panda_state, ee_pose (forward kinematics), external_torque
                      \\-> [status monitor]: stale status, the robot's own reflex
     LCM camera images --> [LcmImageArrayDecoder] --> color/depth/label_image --> [DepthImageToPointCloud] --> point_cloud
                       \\-> [ImageCrop] --> object_*_image --> [DepthImageToPointCloud] --> object_point_cloud
@@ -30,8 +30,9 @@ Safety lives here, not in the caller's hands:
   and starts the controller's integrator at the measured joints.
 * Commanded hand positions are clipped to ``config.workspace``.
 * Joint commands come out of the same :class:`EndEffectorController` as in
-  simulation (differential IK with Franka's joint position and velocity
-  limits and the controller's rate limiter, where the station config has one).
+  simulation: differential IK within Franka's joint position and velocity
+  limits, then the rate limiter at the velocity, acceleration and jerk
+  limits of ``drake_skill.station.limits``.
 * No status for more than ``status_timeout`` (100 ms) stops the station with
   :class:`StaleStatusError`: the check runs every ``STATUS_CHECK_PERIOD``
   (5 ms), and the command published at the instant it fires is the last.
@@ -46,7 +47,8 @@ The station's simulator must run in real time (``realtime`` is True; the
 rollout runner paces its simulator by it). Time inside the diagram is the
 simulator's; the status age is measured in it.
 
-A plant model (arm only) is kept for the forward kinematics of ``ee_pose``.
+Plant models are kept only for the forward kinematics of ``ee_pose`` (the
+arm) and for Meshcat (arm, hand, table; with ``meshcat``).
 There is no ground truth on the robot: ``object_state`` is NaN (a simulated
 robot publishes its own on ``ground_truth_channel``) and ``contact_results``
 empty; ``object_pose`` is the pose the object was placed
@@ -55,7 +57,6 @@ at for the rollout (the human is asked to place it there).
 
 from __future__ import annotations
 
-import dataclasses as dc
 import time
 from typing import Callable
 
@@ -426,7 +427,8 @@ class HardwareStation(Diagram):
         lcm: a DrakeLcm to use (default: a new one on ``config.lcm_url``). The
             station owns its LcmInterfaceSystem: it is the one that handles
             the subscriptions of that DrakeLcm.
-        meshcat: unused (kept for the signature of ``build_station``).
+        meshcat: a ``pydrake.geometry.Meshcat`` to draw the measured arm (and the
+            commanded finger opening) in, or None.
         commanding: send position and hand commands (False: only listen,
             e.g. while a person guides the arm for a kinesthetic demonstration).
     """
@@ -485,7 +487,8 @@ class HardwareStation(Diagram):
 
         # Gripper.
         hand = builder.AddNamedSystem("hand_command", SchunkWsgCommandSender())
-        builder.ExportInput(hand.GetInputPort("position"), "gripper_command")
+        if meshcat is None:
+            builder.ExportInput(hand.GetInputPort("position"), "gripper_command")
         force = builder.AddNamedSystem("hand_force", ConstantVectorSource([config.hand_force]))
         builder.Connect(force.get_output_port(), hand.GetInputPort("force_limit"))
         if commanding:
@@ -516,6 +519,9 @@ class HardwareStation(Diagram):
         self.object_camera = None
         if self.config.enable_camera:
             self._add_camera(builder)
+        if meshcat is not None:
+            self._add_meshcat(builder, meshcat, receiver.get_position_measured_output_port(),
+                              hand.GetInputPort("position"))
         builder.BuildInto(self)
         self.set_name("hardware_station")
 
@@ -564,6 +570,49 @@ class HardwareStation(Diagram):
         builder.ExportOutput(crop_cloud.point_cloud_output_port(), self.object_camera.cloud_port_name)
         for name in ("color_image", "depth_image", "label_image"):
             builder.ExportOutput(crop.GetOutputPort(f"object_{name}"), f"object_{name}")
+
+    def _add_meshcat(self, builder, meshcat, q_port, opening_input) -> None:
+        """The arm, hand and table of the scenario in Meshcat, posed by the measured joints."""
+        from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role, SceneGraph
+        from pydrake.multibody.parsing import Parser
+        from pydrake.multibody.plant import MultibodyPlant
+        from pydrake.systems.primitives import MatrixGain, PassThrough
+        from pydrake.systems.rendering import MultibodyPositionToGeometryPose
+
+        from drake_skill.station.controller import X_FLANGE_HAND
+        from drake_skill.station.models import add_package_paths, model_url
+
+        scene_graph = builder.AddNamedSystem("viz_scene_graph", SceneGraph())
+        plant = MultibodyPlant(0.0)
+        plant.RegisterAsSourceForSceneGraph(scene_graph)
+        parser = Parser(plant)
+        add_package_paths(parser.package_map())
+        arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
+        hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
+        table = parser.AddModels(url=model_url("table.sdf"))[0]
+        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
+        plant.WeldFrames(plant.GetFrameByName("panda_link8", arm), plant.GetFrameByName("panda_hand", hand),
+                         X_FLANGE_HAND)
+        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
+        plant.Finalize()
+        if plant.num_positions() != N_JOINTS + 2:
+            raise AssertionError(f"the Meshcat model has {plant.num_positions()} positions, expected 9")
+        # The plant lives as long as the station (the pose system keeps a reference).
+        self._viz_plant = plant
+        # The opening goes both to the hand driver and, halved per finger, to the drawing.
+        opening = builder.AddNamedSystem("viz_opening", PassThrough(1))
+        builder.ExportInput(opening.get_input_port(), "gripper_command")
+        builder.Connect(opening.get_output_port(), opening_input)
+        fingers = builder.AddNamedSystem("viz_fingers", MatrixGain(np.array([[0.5], [0.5]])))
+        builder.Connect(opening.get_output_port(), fingers.get_input_port())
+        q = builder.AddNamedSystem("viz_positions", Multiplexer([N_JOINTS, 2]))
+        builder.Connect(q_port, q.get_input_port(0))
+        builder.Connect(fingers.get_output_port(), q.get_input_port(1))
+        to_pose = builder.AddNamedSystem("viz_poses", MultibodyPositionToGeometryPose(plant))
+        builder.Connect(q.get_output_port(), to_pose.get_input_port())
+        builder.Connect(to_pose.get_output_port(), scene_graph.get_source_pose_port(plant.get_source_id()))
+        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat,
+                                       MeshcatVisualizerParams(role=Role.kIllustration))
 
     # ------------------------------------------------------------------ object placement
     def nominal_object_pose(self) -> RigidTransform:
