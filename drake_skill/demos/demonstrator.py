@@ -87,17 +87,9 @@ class DemonstratorConfig:
     record_perception: render and segment the camera at action_hz (off:
       faster, no perception fields; the station is built without a camera).
 
-    How the variation sets the quality of plain DMP imitation (one DMP fitted
-    to one demonstration's 10 Hz X_OE, executed in the object frame on
-    randomised object poses with the ground-truth X_WO; measured with this
-    station and scripts as of this writing; greedy successes per demonstration):
-    Open, B = 20: these defaults 0 / 0 / 0 of 20 poses; no variation at all
-    8 / 8 / 0 of 10; light noise (time 0.1, path and grasp 1 mm, 0.5 deg,
-    overshoot 1 cm) without pauses 6 / 5 / 4 of 6, with a 0.1-0.3 s pause
-    6 / 4 / 0 of 6. The hesitation pause hurts the imitation most. Close,
-    B = 10: these defaults 0 / 0 of 20, no variation 0 / 0 of 5: the finger
-    never reaches the lid; the 10-basis fit is up to 6 cm off the
-    demonstrated path (the raw demonstration replayed succeeds).
+    How much this variation leaves plain DMP imitation to learn is measured by
+    ``tools/imitation_success.py --all-demos`` (figures in the issue notes,
+    not here: they change with the station's physics).
     """
 
     count: int = 0

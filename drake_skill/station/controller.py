@@ -62,12 +62,14 @@ class RateLimiter(LeafSystem):
     velocity (time constant ``reference_period``),
 
         a* = w^2 (r - q_c) + 2 w (r_dot - v_c)          (critically damped, w = bandwidth)
-        a  = clip(a*, a_prev - j_max h, a_prev + j_max h), clip to +-a_max,
-             and to (+-v_max - v_c) / h so that the velocity stays in bounds,
+        a  = a_prev + (a* - a_prev) / max(1, max_i |a*_i - a_prev_i| / (j_max_i h)),
+        a  = a / max(1, max_i |a_i| / a_max_i),
+        a  = clip(a, (-v_max - v_c) / h, (v_max - v_c) / h),
         v_c <- v_c + a h,  q_c <- q_c + v_c h.
 
-    So |v_c| <= v_max and |a| <= a_max hold exactly; the jerk bound yields
-    only where the velocity bound brakes. State (discrete, per run): [q_c,
+    The first two steps scale the whole vector (the joint motion keeps its
+    direction); |v_c| <= v_max and |a| <= a_max hold exactly, the jerk bound
+    yields only where the acceleration or velocity bound cuts in. State (discrete, per run): [q_c,
     v_c, a, r_prev, r_dot]. ``reference_scale`` multiplies the reference (a
     finger opening -> each finger's position) and ``lower``/``upper`` clip it.
     """
@@ -111,8 +113,16 @@ class RateLimiter(LeafSystem):
         r = self._reference(context)
         r_dot = r_dot + (h / max(self._tau_ref, h)) * ((r - r_prev) / h - r_dot)
         a = w * w * (r - q) + 2.0 * w * (r_dot - v)
-        a = np.clip(a, a_prev - self._j_max * h, a_prev + self._j_max * h)
-        a = np.clip(a, -self._a_max, self._a_max)
+        # Scale, not clip per joint: the commanded joint motion keeps the IK's
+        # direction (near a singularity the IK moves joints in cancelling
+        # pairs, e.g. joints 1 and 3; clipping them differently moves the hand).
+        da = a - a_prev
+        jerk = np.abs(da) / (self._j_max * h)
+        if jerk.max() > 1.0:
+            a = a_prev + da / jerk.max()
+        over = np.abs(a) / self._a_max
+        if over.max() > 1.0:
+            a = a / over.max()
         a = np.clip(a, (-self._v_max - v) / h, (self._v_max - v) / h)
         v_new = v + a * h
         q_new = q + v_new * h

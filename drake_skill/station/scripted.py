@@ -25,14 +25,13 @@ from pydrake.math import RigidTransform, RotationMatrix
 from drake_skill.station.pose_source import PosePlan
 from drake_skill.station.config import SKILLS
 
-# Hand pointing forward along +x_O and pitched 60 degrees down, fingers spread
-# along y_O. (Pointing level, the Panda runs into joint 6's lower limit while
-# lifting the lid.)
+# Hand pointing forward along +x_O, fingers spread along y_O, pitched down by
+# OPEN_PITCH. (Pointing level, the Panda runs into joint 6's lower limit while
+# lifting the lid.) It keeps y_E = -y_O, as at the home posture, so reaching
+# it from home is a rotation about y alone.
 OPEN_PITCH = np.deg2rad(60.0)
-# Both orientations keep y_E = -y_O, as at the home posture, so reaching them
-# from home is a rotation about y alone.
-R_OE_FORWARD = RotationMatrix.MakeYRotation(OPEN_PITCH) @ RotationMatrix(
-    np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]]))
+R_OE_FORWARD_LEVEL = RotationMatrix(np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]]))
+R_OE_FORWARD = RotationMatrix.MakeYRotation(OPEN_PITCH) @ R_OE_FORWARD_LEVEL
 # Hand pointing down (-z_O), fingers spread along y_O: the home orientation.
 R_OE_DOWN = RotationMatrix(np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]))
 
@@ -40,10 +39,24 @@ LID_HINGE_XZ = np.array([0.10, 0.13])   # models/box.sdf
 FINGER_HALF_THICKNESS = 0.011
 TCP_TO_TIP = 0.009                      # fingertips are 9 mm past the TCP
 # Where the fingertip stops under the lid's lip (x in O; the lip spans -0.125..-0.100).
-UNDER_LIP_X = -0.109
-UNDER_LIP_Z = 0.116
+# Open: the lip's front-bottom edge is LIP_RADIUS from the hinge (models/box.sdf).
+LIP_RADIUS = 0.225
+OPEN_FACE_CONTACT = 0.006   # the face touches the lip edge this far behind the tip [m]
+OPEN_CLEARANCE = 0.005      # the approach stops this far short of the lip edge [m]
+OPEN_PUSH = 0.003           # the sweep presses the face this far into the edge [m]
+OPEN_SWEEP_END = 1.75       # the sweep pushes the lid to this angle [rad], past its tipping angle
 # Close: the hand's lean toward the robot per radian the lid is below 1.4 rad (up to 0.8).
 CLOSE_LEAN = 0.8
+CLOSE_START = 1.9       # the lid resting on its stay [rad]
+CLOSE_RELEASE = 1.2     # pulled this far (past the 1.48 rad tipping angle), the lid falls shut
+CLOSE_BEHIND = 0.03     # the approach starts this far behind the lid's face [m]
+CLOSE_PUSH = 0.004      # the fingertip path runs this far inside the face [m]
+# Draw: the fingertip's centre between the drawer front (x = -0.16) and the
+# handle bar (x = -0.205, radius 8 mm, centre 0.14 m up), 7 mm below the bar.
+DRAW_TILT = np.deg2rad(20.0)
+DRAW_TIP_X = -0.176
+DRAW_TIP_Z = 0.125
+DRAW_TRAVEL = 0.19
 
 
 def _arc(theta, radius):
@@ -59,30 +72,36 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
     """Keyframes (time [s], p_OE [m], R_OE, finger opening [m]) after a move from home."""
     frames = []
     if skill == "open":
-        R = R_OE_FORWARD
-        # Finger's upper front edge sits 1 cm inside the lid's underside as it sweeps.
+        R = RotationMatrix.MakeYRotation(OPEN_PITCH) @ R_OE_FORWARD_LEVEL
         z_E, x_E = R.col(2), R.col(0)
-        tip_offset = (TCP_TO_TIP * z_E + FINGER_HALF_THICKNESS * x_E)[[0, 2]]  # TCP -> tip's upper edge
-        radius, push = LID_HINGE_XZ[0] - UNDER_LIP_X, 0.004
-        under_lip = _xyz(np.array([UNDER_LIP_X, UNDER_LIP_Z]) - tip_offset)
-        # Turn the hand at height first: descending while turning folds the
-        # elbow into joint 4's limit.
-        # Down in front of the box, then in under the lip (a diagonal approach
-        # would cross the lip).
-        frames += [(1.5, under_lip + [-0.05, 0.0, 0.16], R, 0.0),
-                   (2.5, under_lip + [-0.05, 0.0, 0.0], R, 0.0),
-                   (3.5, under_lip, R, 0.0),
-                   (4.0, under_lip, R, 0.0)]    # a pause, as a person makes before lifting
-        for i, theta in enumerate(np.linspace(0.0, 1.85, 9)[1:]):
-            contact = _arc(theta, radius) + push * np.array([np.sin(theta), np.cos(theta)])
-            frames.append((4.0 + 0.5 * (i + 1), _xyz(contact - tip_offset), R, 0.0))
+        # The finger's upper face (normal x_E) rises behind its tip at the
+        # hand's pitch, so it meets the lip's front-bottom edge before the tip
+        # can get under the lip: the face lifts the lid by that edge. The
+        # contact sits OPEN_FACE_CONTACT behind the tip's upper corner.
+        face_back = -z_E[[0, 2]]
+        normal = x_E[[0, 2]]
+        tip_offset = (TCP_TO_TIP * z_E + FINGER_HALF_THICKNESS * x_E)[[0, 2]]  # TCP -> tip's upper corner
+
+        def tcp(theta, push):
+            corner = _arc(theta, LIP_RADIUS) - OPEN_FACE_CONTACT * face_back + push * normal
+            return _xyz(corner - tip_offset)
+
+        start = tcp(0.0, -OPEN_CLEARANCE)
+        # Turn the hand at height first (descending while turning folds the
+        # elbow into joint 4's limit), then down in front of the lip and in.
+        frames += [(1.5, start + [-0.05, 0.0, 0.16], R, 0.0),
+                   (2.5, start + [-0.05, 0.0, 0.0], R, 0.0),
+                   (3.5, start, R, 0.0),
+                   (4.0, start, R, 0.0)]    # a pause, as a person makes before lifting
+        for i, theta in enumerate(np.linspace(0.0, OPEN_SWEEP_END, 9)):
+            frames.append((4.5 + 0.5 * i, tcp(theta, OPEN_PUSH), R, 0.0))
         last = frames[-1][1]
         # Leave upward first, then back: retreating straight back drags the lid.
-        frames += [(8.5, last + [0.0, 0.0, 0.06], R, 0.0),
-                   (9.5, last + [-0.15, 0.0, 0.08], R, 0.0)]
+        frames += [(9.0, last + [0.0, 0.0, 0.06], R, 0.0),
+                   (10.0, last + [-0.15, 0.0, 0.08], R, 0.0)]
     elif skill == "close":
-        radius, push = 0.19, 0.004
-        theta0 = 1.75
+        radius, push = 0.19, CLOSE_PUSH
+        theta0 = CLOSE_START
 
         def hand(theta):
             # Below ~80 degrees the hand leans toward the robot, so its body
@@ -97,26 +116,36 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
             z_E = hand(theta).col(2)
             return _xyz(tip) - TCP_TO_TIP * z_E
 
-        start = tcp(theta0) + [0.03, 0.0, 0.0]
+        start = tcp(theta0) + [CLOSE_BEHIND, 0.0, 0.0]
         frames += [(2.5, start + [0.0, 0.0, 0.10], hand(theta0), 0.0),
                    (3.5, start, hand(theta0), 0.0),
                    (4.0, start, hand(theta0), 0.0)]
-        for i, theta in enumerate(np.linspace(theta0, -0.05, 10)[1:]):
+        # Pull the lid off its stay and over its tipping angle; past it, its
+        # weight shuts it (the hand must not chase and press it).
+        for i, theta in enumerate(np.linspace(theta0, CLOSE_RELEASE, 5)[1:]):
             frames.append((4.0 + 0.5 * (i + 1), tcp(theta), hand(theta), 0.0))
         last = frames[-1][1]
-        # leave up and toward the hinge: lifting straight up can catch the lip
-        frames += [(9.5, last + [0.06, 0.0, 0.12], hand(0.0), 0.0)]
+        # Up, out of the falling lid's way, and toward the hinge.
+        frames += [(6.5, last + [0.0, 0.0, 0.08], hand(CLOSE_RELEASE), 0.0),
+                   (7.5, last + [0.06, 0.0, 0.14], hand(CLOSE_RELEASE), 0.0)]
     elif skill == "draw":
-        R = R_OE_DOWN
-        gap_x, tip_z = -0.173, 0.115
-        frames += [(2.5, np.array([gap_x, 0.0, 0.30]), R, 0.0),
-                   (3.5, np.array([gap_x, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
-                   (4.0, np.array([gap_x, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
-                   (7.0, np.array([gap_x - 0.19, 0.0, tip_z + TCP_TO_TIP]), R, 0.0),
+        # Tilted so the fingertips lead toward the drawer front and the hand
+        # housing trails toward the robot, clear of the cabinet's top edge
+        # (pointing straight down, the housing lands on the cabinet before the
+        # fingers are below the handle).
+        R = RotationMatrix.MakeYRotation(-DRAW_TILT) @ R_OE_DOWN
+        z_E = R.col(2)
+        tip = np.array([DRAW_TIP_X, 0.0, DRAW_TIP_Z])
+        tcp = tip - TCP_TO_TIP * z_E
+        out = tcp - [DRAW_TRAVEL, 0.0, 0.0]
+        frames += [(2.5, tcp + [0.0, 0.0, 0.16], R, 0.0),
+                   (3.5, tcp, R, 0.0),
+                   (4.0, tcp, R, 0.0),
+                   (7.0, out, R, 0.0),
                    # lift clear of the handle (never pushing the drawer back), then
                    # away from the robot's base, where the arm can settle
-                   (8.0, np.array([gap_x - 0.20, 0.0, 0.22]), R, 0.0),
-                   (8.8, np.array([gap_x - 0.14, 0.0, 0.32]), R, 0.0)]
+                   (8.0, out + [-0.01, 0.0, 0.10], R, 0.0),
+                   (8.8, out + [0.05, 0.0, 0.20], R, 0.0)]
     else:
         raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
     return frames
