@@ -103,8 +103,8 @@ def test_deterministic_across_resets_and_plane_fitted_once(close_rig):
         rig.diagram.SetDefaultContext(rig.context)
         assert rig.segmenter.table_plane(rig.seg_context) is None     # not stored before the first update
         rig.reset(seed)                                               # processes the frame at t = 0
-        xyz, _ = _cloud_arrays(rig, "object_point_cloud")
-        first_plane = fit_table_plane(xyz, rig.segmenter.config.segmentation, rig.station.object_camera.window.shape,
+        xyz, _ = _cloud_arrays(rig)          # the plane comes from the full frame
+        first_plane = fit_table_plane(xyz, rig.segmenter.config.segmentation, (480, 640),
                                       seed=rig.segmenter.config.seed)
         rig.simulator.AdvanceTo(0.25)
         plane = rig.segmenter.table_plane(rig.seg_context)

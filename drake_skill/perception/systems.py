@@ -34,7 +34,12 @@ frame for both. Groups:
   when none is configured, not stored until the first update that sees a
   frame in which the plane could be fitted (RANSAC seeded with ``seed``),
   then kept for the rest of the run: the table does not move. Until it is
-  stored, each evaluation fits it on the current frame.
+  stored, each evaluation fits it on the current frame: on the optional
+  input ``plane_point_cloud`` when it is connected (the station's full
+  frame, when ``point_cloud`` is the object camera's crop: the plane is then
+  the full frame's, as the segmentation is, so the crop changes nothing the
+  system computes; that cloud is evaluated only until the plane is stored),
+  else on ``point_cloud``.
 - held (1 + 1 + 3 + 7 + 3 n_points): ``[stored, yaw, position (3),
   bounding_box (7), object_points (n_points x 3, row-major)]``, the last
   valid frame's outputs (as of the latest update).
@@ -144,6 +149,8 @@ class ObjectSegmenterConfig:
     n_points: points of ``object_points`` (2048, docs/method.md section 3).
     seed: seeds the resampling and the table-plane RANSAC.
     image_width, image_height: the organised cloud's image size [pixels].
+    plane_image_width, plane_image_height: image size of the optional
+      ``plane_point_cloud`` input the table plane is fitted on [pixels].
     table_plane: ``[a, b, c, d]`` of the table in the world frame, or empty to
       fit it on the first frames (see the module docstring).
     default_pose: ``[x, y, yaw]`` [m, m, rad] of X_WO before any valid frame.
@@ -156,6 +163,8 @@ class ObjectSegmenterConfig:
     seed: int = 0
     image_width: int = 640
     image_height: int = 480
+    plane_image_width: int = 640
+    plane_image_height: int = 480
     table_plane: list[float] = dc.field(default_factory=list)
     default_pose: list[float] = dc.field(default_factory=lambda: [0.55, 0.0, 0.0])
     segmentation: SegmentationConfig = dc.field(default_factory=SegmentationConfig)
@@ -173,6 +182,9 @@ class ObjectSegmenterConfig:
             bad("n_points", self.n_points, "a positive number of points")
         if self.image_width < 1 or self.image_height < 1:
             bad("image_width/image_height", (self.image_width, self.image_height), "positive pixel counts")
+        if self.plane_image_width < 1 or self.plane_image_height < 1:
+            bad("plane_image_width/plane_image_height", (self.plane_image_width, self.plane_image_height),
+                "positive pixel counts")
         if len(self.table_plane) not in (0, 4) or not all(math.isfinite(v) for v in self.table_plane):
             bad("table_plane", self.table_plane, "[] (fit it) or 4 finite coefficients [a, b, c, d]")
         if len(self.table_plane) == 4 and math.hypot(*self.table_plane[:3]) < 1e-9:
@@ -192,8 +204,9 @@ def segmenter_config_for_station(station_config, window=None) -> ObjectSegmenter
     ``object_camera.window``) for the cropped object camera."""
     cam, obj = station_config.camera, station_config.object
     width, height = (cam.width, cam.height) if window is None else (window.width, window.height)
-    config = ObjectSegmenterConfig(period_s=1.0 / cam.fps, image_width=width,
-                                   image_height=height, default_pose=[obj.x, obj.y, obj.yaw])
+    config = ObjectSegmenterConfig(period_s=1.0 / cam.fps, image_width=width, image_height=height,
+                                   plane_image_width=cam.width, plane_image_height=cam.height,
+                                   default_pose=[obj.x, obj.y, obj.yaw])
     config.segmentation.nominal_yaw = obj.yaw
     return config.validate()
 
@@ -242,6 +255,7 @@ class ObjectSegmenter(LeafSystem):
         self._default_X_WO = RigidTransform(RotationMatrix.MakeZRotation(yaw), [x, y, 0.0])
 
         self._cloud_port = self.DeclareAbstractInputPort("point_cloud", Value(PointCloud()))
+        self._plane_cloud_port = self.DeclareAbstractInputPort("plane_point_cloud", Value(PointCloud()))
         plane0 = np.zeros(5)
         if config.table_plane:
             plane = np.asarray(config.table_plane, dtype=float)
@@ -254,7 +268,8 @@ class ObjectSegmenter(LeafSystem):
         self._frame_cache = self.DeclareCacheEntry(
             "segmentation of the current point cloud",
             ValueProducer(allocate=lambda: AbstractValue.Make(None), calc=self._calc_frame),
-            {self._cloud_port.ticket(), self.discrete_state_ticket(self._plane_index)},
+            {self._cloud_port.ticket(), self._plane_cloud_port.ticket(),
+             self.discrete_state_ticket(self._plane_index)},
         )
         deps = {self._frame_cache.ticket(), self.discrete_state_ticket(self._held_index)}
         self._points_port = self.DeclareAbstractOutputPort(
@@ -273,6 +288,9 @@ class ObjectSegmenter(LeafSystem):
 
     def get_point_cloud_input_port(self):
         return self._cloud_port
+
+    def get_plane_point_cloud_input_port(self):
+        return self._plane_cloud_port
 
     def get_object_points_output_port(self):
         return self._points_port
@@ -309,6 +327,18 @@ class ObjectSegmenter(LeafSystem):
             raise ValueError("point_cloud: expected xyz and rgb fields (BaseField.kXYZs | kRGBs)")
         return cloud.xyzs().T, cloud.rgbs().T     # (P, 3) views, no copy
 
+    def _fit_plane(self, context, xyz) -> np.ndarray:
+        """The table plane fitted on ``plane_point_cloud`` when connected, else on ``xyz``."""
+        cfg, shape = self._config, self._image_shape
+        if self._plane_cloud_port.HasValue(context):
+            cloud = self._plane_cloud_port.Eval(context)
+            shape = (cfg.plane_image_height, cfg.plane_image_width)
+            if cloud.size() != shape[0] * shape[1] or not cloud.has_xyzs():
+                raise ValueError(f"plane_point_cloud: {cloud.size()} points, expected an organised "
+                                 f"{shape[0]}x{shape[1]} cloud with xyz; set plane_image_width/height")
+            xyz = cloud.xyzs().T
+        return fit_table_plane(xyz, cfg.segmentation, shape, seed=cfg.seed)
+
     def _calc_frame(self, context, value):
         xyz, rgb = self._read_cloud(context)
         cfg = self._config
@@ -317,7 +347,7 @@ class ObjectSegmenter(LeafSystem):
             plane = np.array(stored[1:])
         else:
             try:
-                plane = fit_table_plane(xyz, cfg.segmentation, self._image_shape, seed=cfg.seed)
+                plane = self._fit_plane(context, xyz)
             except ValueError:        # blank frame, table hidden: no plane yet, not valid
                 value.set_value(_Frame(None, None, None))
                 return
@@ -370,17 +400,21 @@ def add_object_segmenter(builder, station, config: ObjectSegmenterConfig | None 
 
     The cloud is the station's cropped ``object_point_cloud`` when the station has
     an object camera (``station.object_camera``) and ``config`` is None or sized
-    for its window, else the full-frame ``point_cloud``. ``config`` defaults to
+    for its window, with the full-frame ``point_cloud`` on ``plane_point_cloud``
+    for the table plane; else the full-frame ``point_cloud``. ``config`` defaults to
     :func:`segmenter_config_for_station` of ``station.config`` for that cloud.
     """
     camera = getattr(station, "object_camera", None)
     if config is None:
         config = segmenter_config_for_station(station.config, camera.window if camera is not None else None)
-    port = "point_cloud"
-    if camera is not None and (config.image_height, config.image_width) == camera.window.shape:
-        port = camera.cloud_port_name
     segmenter = builder.AddNamedSystem(name, ObjectSegmenter(config))
-    builder.Connect(station.GetOutputPort(port), segmenter.get_point_cloud_input_port())
+    if camera is not None and (config.image_height, config.image_width) == camera.window.shape:
+        builder.Connect(station.GetOutputPort(camera.cloud_port_name), segmenter.get_point_cloud_input_port())
+        # The table plane from the full frame, as without the crop (rendered until the
+        # plane is stored: on the run's first frame).
+        builder.Connect(station.GetOutputPort("point_cloud"), segmenter.get_plane_point_cloud_input_port())
+    else:
+        builder.Connect(station.GetOutputPort("point_cloud"), segmenter.get_point_cloud_input_port())
     return segmenter
 
 

@@ -30,13 +30,17 @@ At the end of a rollout, :meth:`goal_sequence`, :meth:`smoothed_return`
 
 The perception-to-reward chain of docs/architecture.md, wired behind a station.
 
-    [Station] --point_cloud--> [ObjectSegmenter] --object_points, valid--> [PcaeFeaturizer]
+    [Station] --object_point_cloud--> [ObjectSegmenter] --object_points, valid--> [PcaeFeaturizer]
               --goal_data, goal_valid--> [PomrpReward] --> reward, return
 
 ``add_goal_pipeline(builder, station, skill)`` adds the three systems of a
 fitted :class:`~drake_skill.skill.Skill` (its PCAE weights, PCA and POMRP) and
-connects them by their named ports. Each samples at the camera rate
-(``station.config.camera.fps``, 10 Hz). The reward system reads the goal data
+connects them by their named ports; the segmenter reads the station's
+object camera (the camera cropped to where the object can appear,
+``drake_skill.station.camera``). Each samples at the camera rate
+(``station.config.camera.fps``, 10 Hz), and the camera renders and the
+segmenter segments once per frame for both the segmenter's memory and the
+featurizer (both are discrete updates, after the plant's step). The reward system reads the goal data
 the featurizer stored at the previous frame, so the reward lags the camera by
 one frame (0.1 s); the thesis' returns are sums over whole executions, which a
 short settle time at the end covers.
