@@ -172,10 +172,12 @@ def test_perception_is_recorded_at_10_hz_on_the_action_instants():
     p_O = (np.asarray(X_WO.inverse().GetAsMatrix4()) @ np.c_[demo.object_points[3], np.ones(2048)].T)[:3].T
     assert np.all(np.abs(p_O[:, :2]) < 0.25) and p_O[:, 2].min() > 0.0 and p_O[:, 2].max() < 0.2
     # The ObjectSegmenter system that executions use gives the same points for the last frame.
-    segmenter = ObjectSegmenter(segmenter_config_for_station(sim.config))
+    segmenter = ObjectSegmenter(segmenter_config_for_station(sim.config, sim.station.object_camera.window))
     seg_context = segmenter.CreateDefaultContext()
-    cloud = sim.station.GetOutputPort("point_cloud").Eval(sim.station_context())
+    cloud = sim.station.GetOutputPort("object_point_cloud").Eval(sim.station_context())
     segmenter.get_point_cloud_input_port().FixValue(seg_context, cloud)
+    segmenter.get_plane_point_cloud_input_port().FixValue(
+        seg_context, sim.station.GetOutputPort("point_cloud").Eval(sim.station_context()))
     points = segmenter.get_object_points_output_port().Eval(seg_context)
     np.testing.assert_array_equal(np.asarray(points, dtype=np.float32), demo.object_points[-1])
 
