@@ -243,7 +243,7 @@ class RolloutResult:
                 "object_pose": [float(v) for v in self.object_pose]}
 
     def equal_numbers(self, other: "RolloutResult") -> bool:
-        """Same numbers (everything but ``wall_s`` and ``ik_warnings``' timing-free count kept)."""
+        """Same numbers in every field but ``wall_s`` (arrays compared exactly, NaN equal to NaN)."""
         for field in dc.fields(self):
             if field.name == "wall_s":
                 continue
