@@ -4,7 +4,7 @@
 
 The default learning run of ``drake-skill learn`` (Open, PI^2-ES-Cov, dense
 reward, 5 episodes x 6 rollouts = 36 rollouts, and 6 greedy executions; the
-held-out evaluation and the Meshcat replays off), run twice from the same
+held-out evaluation off, and the Meshcat replays unless ``--replay``), run twice from the same
 fitted skill and seed: on 1 worker (the rollouts in this process) and on 2
 worker processes. The wall time of each covers the whole run, worker start-up
 (each worker builds its diagram) included. The skill is fitted first from the
@@ -12,7 +12,8 @@ scripted demonstrations (not timed) and cached under ``--cache``
 (default ``results/bench_learn/``); ``--skill-dir`` uses a given one.
 
 JSON keys: ``wall_s_1_worker``, ``wall_s_2_workers``, ``speedup``
-(1-worker / 2-worker wall time), ``identical`` (both runs gave the same
+(1-worker / 2-worker wall time), ``replay`` (whether the Meshcat replays
+were recorded: off unless ``--replay``), ``identical`` (both runs gave the same
 greedy returns and final weights), ``n_rollouts``, ``skill``. The issue
 requires at most 180 s with 2 workers and a speedup of at least 1.6 on a
 2-core machine.
@@ -45,13 +46,14 @@ def fitted_skill_dir(skill: str, cache: Path, progress: bool = False) -> Path:
     return directory
 
 
-def timed_run(skill_dir: Path, workers: int, episodes: int, rollouts: int, seed: int, out: Path):
-    """(wall s, outcome) of one learning run without held-out evaluation and replays."""
+def timed_run(skill_dir: Path, workers: int, episodes: int, rollouts: int, seed: int, out: Path,
+              replay: bool = False):
+    """(wall s, outcome) of one learning run without held-out evaluation (and, by default, replays)."""
     from drake_skill.learning.loop import LearnConfig, learn
 
     config = LearnConfig(episodes=episodes, rollouts=rollouts, seed=seed, held_out=0)
     start = time.perf_counter()
-    outcome = learn(skill_dir, out, config, workers=workers, replay=False, progress=False, force=True,
+    outcome = learn(skill_dir, out, config, workers=workers, replay=replay, progress=False, force=True,
                     log=io.StringIO())
     return time.perf_counter() - start, outcome
 
@@ -66,20 +68,25 @@ def main(argv=None) -> int:
     parser.add_argument("--rollouts", type=int, default=6)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE, help="where the fitted skill is cached")
+    parser.add_argument("--replay", action="store_true",
+                        help="also record the Meshcat replays (first and last greedy execution, run in "
+                             "this process)")
     args = parser.parse_args(argv)
 
     import numpy as np
 
     skill_dir = args.skill_dir or fitted_skill_dir(args.skill, args.cache, progress=not args.json)
     with tempfile.TemporaryDirectory(prefix="bench_learn_") as tmp:
-        wall_1, one = timed_run(skill_dir, 1, args.episodes, args.rollouts, args.seed, Path(tmp) / "w1")
-        wall_2, two = timed_run(skill_dir, 2, args.episodes, args.rollouts, args.seed, Path(tmp) / "w2")
+        wall_1, one = timed_run(skill_dir, 1, args.episodes, args.rollouts, args.seed, Path(tmp) / "w1",
+                                args.replay)
+        wall_2, two = timed_run(skill_dir, 2, args.episodes, args.rollouts, args.seed, Path(tmp) / "w2",
+                                args.replay)
     identical = bool(np.array_equal(one.search.mean, two.search.mean)
                      and one.summary["curve"] == two.summary["curve"])
     result = {"wall_s_1_worker": round(wall_1, 1), "wall_s_2_workers": round(wall_2, 1),
               "speedup": round(wall_1 / wall_2, 3), "identical": identical,
               "n_rollouts": args.episodes * args.rollouts, "n_greedy": args.episodes + 1,
-              "skill": one.summary["skill"]}
+              "skill": one.summary["skill"], "replay": bool(args.replay)}
     if args.json:
         print(json.dumps(result))
     else:
