@@ -195,7 +195,8 @@ def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Pa
     per_s = {k: round(1e3 * v / full["simulated_s"], 2) for k, v in parts.items()}
     per_s["plant_only"] = round(1e3 * plant["wall_s"] / plant["simulated_s"], 2)
     frames = max(1, timers.calls.get("encoding", 1))
-    window = runner.station.object_camera.window
+    camera = getattr(runner.station, "object_camera", None)
+    window = camera.window if camera is not None else None
     return {
         "skill": skill_name, "skill_seed": seed, "object_seed": object_seed,
         "simulated_s": round(full["simulated_s"], 3),
@@ -206,12 +207,69 @@ def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Pa
         "per_frame_ms": {k: round(1e3 * parts[k] / frames, 2)
                          for k in ("render", "cloud", "segmentation", "encoding", "reward")},
         "calls_per_frame": {k: round(v / frames, 2) for k, v in timers.calls.items()},
-        "object_camera": {"x0": window.x0, "y0": window.y0, "width": window.width, "height": window.height},
+        "object_camera": None if window is None else {"x0": window.x0, "y0": window.y0,
+                                                      "width": window.width, "height": window.height},
         "return": round(full["return"], 4), "verdict": full["verdict"], "goal_frames": full["frames"],
         "final_object_state": round(full["final_object_state"], 4), "success": full["success"],
         "final_object_state_plant": round(plant["final_object_state"], 4),
         "load_average": [round(v, 2) for v in os.getloadavg()],
     }
+
+
+def encode_variants(n: int = 40, seed: int = 0) -> dict:
+    """Milliseconds per 2048-point encoding (one thread; min and median of ``n`` fresh
+    clouds) of the shipped PCAE's encoder run five ways: the module's own
+    ``encode_points`` (BatchNorm folded, one GEMM + in-place ReLU per layer under
+    ``torch.inference_mode``), the unfolded ``nn.Module`` under ``inference_mode`` and
+    under ``no_grad``, ``torch.compile`` of the folded encoder, and plain numpy
+    matmuls (float32) of the folded weights. The fastest is what ``encode_points`` does."""
+    import torch
+
+    from drake_skill.perception.pcae import load_pcae, normalize_points
+
+    torch.set_num_threads(1)
+    model = load_pcae()
+    clouds = np.random.default_rng(seed).uniform(-0.15, 0.15, (n + 3, 2048, 3)).astype(np.float32)
+    x = lambda c: torch.from_numpy(normalize_points(c[None]))       # noqa: E731
+    with torch.inference_mode():
+        model.encode_fast(x(clouds[0]))
+    folded = [(w.numpy().copy(), b.numpy().copy()) for w, b in model._folded]
+
+    def numpy_encode(c):
+        y = normalize_points(c)
+        for w, b in folded:
+            y = y @ w
+            y += b
+            np.maximum(y, 0.0, out=y)
+        return y.max(axis=0)
+
+    def inference(c):
+        with torch.inference_mode():
+            return model.encode(x(c))
+
+    def no_grad(c):
+        with torch.no_grad():
+            return model.encode(x(c))
+
+    compiled = torch.compile(model.encode_fast)
+
+    def compiled_encode(c):
+        with torch.inference_mode():
+            return compiled(x(c))
+
+    variants = {"encode_points": model.encode_points, "module_inference_mode": inference,
+                "module_no_grad": no_grad, "torch_compile": compiled_encode, "numpy": numpy_encode}
+    out = {}
+    for name, f in variants.items():
+        for c in clouds[:3]:
+            f(c)
+        times = []
+        for c in clouds[3:]:
+            t0 = time.perf_counter()
+            f(c)
+            times.append(time.perf_counter() - t0)
+        out[name] = {"min_ms": round(1e3 * min(times), 3), "median_ms": round(1e3 * float(np.median(times)), 3)}
+    return out
 
 
 def main(argv=None) -> int:
@@ -222,7 +280,14 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="demonstrator seed of the fitted skill")
     parser.add_argument("--object-seed", type=int, default=3, help="object pose of the timed rollout")
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE, help="where the fitted skill is kept")
+    parser.add_argument("--encode-variants", action="store_true",
+                        help="only time the PCAE encoder's inference variants (see encode_variants)")
     args = parser.parse_args(argv)
+    if args.encode_variants:
+        print(json.dumps(encode_variants()) if args.json else
+              "\n".join(f"{k:24s} min {v['min_ms']:6.2f} ms  median {v['median_ms']:6.2f} ms"
+                        for k, v in encode_variants().items()))
+        return 0
     if args.cache.exists() and not args.cache.is_dir():
         raise NotADirectoryError(f"--cache {args.cache}: not a directory; give a directory for the fitted skill")
     result = run(args.skill, args.seed, args.object_seed, args.cache, progress=not args.json)
