@@ -58,15 +58,16 @@ def test_rollouts_are_deterministic_and_weights_matter(draw_setup):
     dmp, runner, _ = draw_setup
     a = runner.run(dmp.weights, seed=9)
     W = dmp.weights.copy()
-    W[:, 0] += 0.5 * np.abs(W[:, 0]).max()          # push the whole x path around
+    W[:, 2] += 100.0              # lifts the path about 1 m (K = 100), above the arm's reach
     c = runner.run(W, seed=9)
     b = runner.run(dmp.weights, seed=9)              # after another rollout: the same numbers
     assert a.equal_numbers(b) and np.array_equal(a.ee_pose, b.ee_pose)
-    assert not np.allclose(a.ee_pose, c.ee_pose, atol=1e-3)
+    assert c.failed or not np.allclose(a.ee_pose, c.ee_pose, atol=1e-3)
     d = runner.run(dmp.weights, seed=10)
     assert not d.X_WO_true.IsNearlyEqualTo(a.X_WO_true, 1e-6)
     assert np.allclose(a.object_pose, a.object_pose_true, atol=1e-12)   # ground-truth frame
-    assert c.ik_warnings > 0 and a.ik_warnings < c.ik_warnings   # the pushed path leaves the reach
+    if not c.failed:   # differential IK says the lifted path is out of reach; the runner counts it
+        assert c.ik_warnings > a.ik_warnings
 
 
 def test_runner_rejects_bad_weights(draw_setup):
@@ -119,10 +120,14 @@ def reward_runner(tmp_path_factory):
 
 def test_rollout_with_the_goal_pipeline(reward_runner):
     skill, runner = reward_runner
-    a = runner.run(skill.initial_weights, seed=21)
-    if a.failed:   # the station may stop a rollout (reflex); then it says why and pays nothing
-        assert a.reason in FAILURE_REASONS and a.dense_return == 0.0
-        pytest.skip(f"the imitation failed on this station ({a.reason}); reward checks need a full rollout")
+    for seed in (21, 23, 25, 27):
+        a = runner.run(skill.initial_weights, seed=seed)
+        if not a.failed:
+            break
+        # The station may stop a rollout (reflex); then it says why and pays nothing.
+        assert a.reason in FAILURE_REASONS and a.dense_return == 0.0 and a.message
+    else:
+        pytest.skip(f"the imitation failed on 4 poses ({a.reason}); reward checks need a full rollout")
     # Object frame from the segmenter's first frame: near the truth, not equal to it.
     assert np.linalg.norm(a.object_pose[:3] - a.object_pose_true[:3]) < 0.02
     assert not np.array_equal(a.object_pose, a.object_pose_true)
@@ -135,4 +140,4 @@ def test_rollout_with_the_goal_pipeline(reward_runner):
     assert isinstance(a.verdict, bool) and isinstance(a.ik_warnings, int) and a.wall_s > 0
     # Another pose, then the first again: the same numbers (nothing per run on the runner).
     runner.run(skill.initial_weights, seed=22)
-    assert a.equal_numbers(runner.run(skill.initial_weights, seed=21))
+    assert a.equal_numbers(runner.run(skill.initial_weights, seed=a.seed))
