@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: setup
-	$(VENV)/bin/drake-skill station-demo
+	$(VENV)/bin/drake-skill learn --force
 
 test: setup
 	$(PY) -m pytest -q
