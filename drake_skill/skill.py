@@ -419,6 +419,7 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
 
     fit = fit_demonstrations([(d.times, d.X_OE) for d in demos], config.dmp,
                              seed=config.seed, ridge=config.dmp_ridge)
+    config = dc.replace(config, dmp=fit.config)  # with the scaled columns chosen by the fit
 
     from drake_skill.perception.pcae import load_pcae
     weights = _pcae_path(config)

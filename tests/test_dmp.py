@@ -351,3 +351,30 @@ def test_benchmark_prints_one_json_object(capsys):
     assert {"single_ms", "batch1000_s", "movement_primitives_single_ms"} <= set(result)
     assert result["batch_shape"] == [8, 5001, 7] and result["movement_primitives_single_ms"] is None
     assert 0 < result["single_ms"] < 1000 and result["reproduction"]["position_rmse_mm"] < 1.0
+
+
+def test_fit_demonstrations_scales_only_the_columns_that_move():
+    """Default: columns every demonstration moves along by >= 5 cm keep a = g - y0 (thesis
+    scaling toward a new start), nearly-still ones are not scaled; both continuous in y0."""
+    t, poses = _lift_and_return()
+    other = poses.copy()
+    other[:, 0] *= 1.1
+    fit = fit_demonstrations([(t, poses), (t, other)], DmpConfig(n_basis=20))
+    assert fit.config.scaled_dims == [0]  # x moves 0.3 m; z returns to its start, quaternion fixed
+    dmp = fit.dmps[0]
+    for dz in (0.005, -0.005):
+        y0 = dmp.y0.copy()
+        y0[2] += dz
+        out = integrate(Dmp(dmp.weights, y0, dmp.goal, dmp.tau), fit.config, t)
+        assert np.abs(out[:, :3] - poses[:, :3]).max() < 0.01
+    # A start 5 cm further from the goal along x stretches the x motion (thesis scaling):
+    y0 = dmp.y0.copy()
+    y0[0] -= 0.05
+    out = integrate(Dmp(dmp.weights, y0, dmp.goal, dmp.tau), fit.config, t)
+    s = (out[:, 0] - y0[0]) / (dmp.goal[0] - y0[0])
+    np.testing.assert_allclose(s, (poses[:, 0] - poses[0, 0]) / (poses[-1, 0] - poses[0, 0]), atol=0.01)
+    # scale_threshold <= 0 keeps scaled_dims as given (here: none, no scaling at all).
+    plain = fit_demonstrations([(t, poses), (t, other)], DmpConfig(n_basis=20, scale_threshold=0.0))
+    assert plain.config.scaled_dims == []
+    with pytest.raises(ValueError, match=r"DmpConfig\.scaled_dims: expected distinct weight columns in \[0, 7\)"):
+        DmpConfig(scaled_dims=[7]).validate()

@@ -31,12 +31,19 @@ Equations (one controlled dimension; all dimensions share the phase):
   the forcing term twice (in the regression and in the normalised mixture);
   on a 0.3 m minimum-jerk demonstration with B = 20 the position RMSE is
   2.3 mm with 1, 0.7 mm with 4, 0.55 mm with 8 (B = 10: 7.1, 2.4, 2.1 mm);
-- amplitude ``a``. Default (``scale_by_amplitude=False``): ``a = 1``, no
-  amplitude scaling, as movement_primitives and others do. The forcing term
-  then does not depend on the start, so the motion is continuous in ``y0``:
-  moving the start by ``dy0`` changes the trajectory by
-  ``dy0 (1 - K s(t))``, at most ``|dy0|`` (docs/method.md section 2, "Amplitude").
-  Option ``scale_by_amplitude=True`` is the thesis's form (Eq. 3.4),
+- amplitude ``a`` (docs/method.md section 2, "Amplitude"). Default
+  (``scale_by_amplitude=False``): per weight column, ``a = g - y0`` (no
+  floor) in the columns of ``DmpConfig.scaled_dims`` and ``a = 1`` (no
+  scaling, as movement_primitives and others do) in the others.
+  :func:`fit_demonstrations` fills ``scaled_dims`` with the columns where
+  every demonstration moves by at least ``DmpConfig.scale_threshold``
+  (5 cm / 0.05): those keep the thesis's spatial scaling toward a new start,
+  the nearly-still ones (a lift that returns to its height, a quaternion
+  component) are not scaled. Both are continuous in ``y0``: an unscaled
+  column changes by ``dy0 (1 - K s(t))``, at most ``|dy0|``; a scaled
+  column's shape scales by ``(g - y0) / (g - y0_demo)``, which changes sign
+  only if the start moves past the goal by more than the threshold.
+  Option ``scale_by_amplitude=True`` is the thesis's form (Eq. 3.4) in every column,
   ``a = g - y0`` per dimension, with ``|a|`` floored at
   ``DmpConfig.amplitude_floor`` keeping its sign (sign(0) = +1) so the fit
   stays finite where start and goal coincide (w = f / 0 otherwise). That form
@@ -91,6 +98,7 @@ Integration:
 # No ``from __future__ import annotations``: pydrake's yaml_load_typed reads the
 # dataclass field types, which must be real types rather than strings.
 import cmath
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -169,6 +177,13 @@ class DmpConfig:
     #: Floor on |a| per dimension (m for xyz, unitless for quaternion/rad); only
     #: used with ``scale_by_amplitude``.
     amplitude_floor: float = 1e-2
+    #: Weight columns scaled by a = g - y0 when ``scale_by_amplitude`` is False
+    #: (filled by fit_demonstrations when ``scale_threshold`` > 0).
+    scaled_dims: list[int] = field(default_factory=list)
+    #: fit_demonstrations scales a column when every demonstration's |g - y0|
+    #: there is at least this (m for xyz, unitless for quaternion components,
+    #: rad for "ude" rotations); <= 0 keeps ``scaled_dims`` as given.
+    scale_threshold: float = 0.05
 
     def validate(self) -> "DmpConfig":
         """Raises ValueError naming the first bad field; returns self."""
@@ -184,6 +199,13 @@ class DmpConfig:
             raise ValueError(f"DmpConfig.quaternion: expected one of {_QUATERNION_MODES}, got {self.quaternion!r}")
         if self.regression not in _REGRESSIONS:
             raise ValueError(f"DmpConfig.regression: expected one of {_REGRESSIONS}, got {self.regression!r}")
+        dims = list(self.scaled_dims)
+        if any(not isinstance(i, (int, np.integer)) or isinstance(i, bool) or not 0 <= i < self.weight_dim
+               for i in dims) or len(set(dims)) != len(dims):
+            raise ValueError(f"DmpConfig.scaled_dims: expected distinct weight columns in [0, {self.weight_dim}), "
+                             f"got {dims!r}")
+        if not math.isfinite(self.scale_threshold):
+            raise ValueError(f"DmpConfig.scale_threshold: expected a finite value, got {self.scale_threshold!r}")
         return self
 
     @property
@@ -347,7 +369,11 @@ def basis_features(x, centres: np.ndarray, widths: np.ndarray) -> np.ndarray:
 
 def _floor_amplitude(a: np.ndarray, config: DmpConfig) -> np.ndarray:
     if not config.scale_by_amplitude:
-        return np.ones_like(a)
+        out = np.ones_like(a)
+        if config.scaled_dims:
+            dims = list(config.scaled_dims)
+            out[..., dims] = a[..., dims]
+        return out
     sign = np.where(a < 0.0, -1.0, 1.0)
     return sign * np.maximum(np.abs(a), config.amplitude_floor)
 
@@ -356,9 +382,10 @@ def forcing_amplitude(y0, goal, config: DmpConfig) -> np.ndarray:
     """Amplitude ``a`` multiplying the forcing term, shape (..., weight_dim).
 
     "vector": ``a = g - y0`` (7). "ude": position ``g - y0`` (3) then
-    ``2 log(g_q * conj(q0))`` (3, rad). Floored as described in the module
-    docstring; all ones when ``scale_by_amplitude`` is False. ``y0``/``goal``
-    may carry leading batch axes.
+    ``2 log(g_q * conj(q0))`` (3, rad). With ``scale_by_amplitude`` floored
+    as described in the module docstring; otherwise that value in the
+    ``scaled_dims`` columns and 1 elsewhere. ``y0``/``goal`` may carry
+    leading batch axes.
     """
     y0 = np.asarray(y0, dtype=float)
     goal = np.asarray(goal, dtype=float)
@@ -480,6 +507,8 @@ class DemonstrationFit:
     initial_index: int
     sigma0: np.ndarray
     ridge: float = field(default=0.0)
+    #: The DmpConfig the fits used (``scaled_dims`` filled in); execute them with it.
+    config: DmpConfig | None = None
 
     @property
     def initial(self) -> Dmp:
@@ -506,7 +535,7 @@ def fit_demonstrations(
     if len(demonstrations) < 2:
         raise ValueError(f"demonstrations: expected at least 2 (covariance across fits), got {len(demonstrations)}")
     reference = None
-    dmps = []
+    checked_demos = []
     for i, demo in enumerate(demonstrations):
         if len(demo) != 2:
             raise ValueError(f"demonstrations[{i}]: expected a pair (times, poses), got {len(demo)} items")
@@ -514,9 +543,20 @@ def fit_demonstrations(
         _, checked = validate_demonstration(times, poses, name=f"demonstrations[{i}]")
         if reference is None:
             reference = checked[0, 3:]
-        dmps.append(fit_dmp(times, checked, config, quaternion_reference=reference))
+        checked[:, 3:] = make_quaternions_continuous(checked[:, 3:], reference=reference)
+        checked_demos.append((times, checked))
+    if not config.scale_by_amplitude and config.scale_threshold > 0:
+        # Columns every demonstration moves along by at least the threshold keep the
+        # thesis's spatial scaling; the others are not scaled (module docstring).
+        amplitudes = np.stack([np.abs(forcing_amplitude(p[0], p[-1], DmpConfig(
+            quaternion=config.quaternion, scale_by_amplitude=True, amplitude_floor=1e-300)))
+            for _, p in checked_demos])
+        dims = [int(i) for i in np.flatnonzero(np.all(amplitudes >= config.scale_threshold, axis=0))]
+        config = dataclasses.replace(config, scaled_dims=dims).validate()
+    dmps = [fit_dmp(t, p, config, quaternion_reference=reference) for t, p in checked_demos]
     index, _ = initial_weights(dmps, seed)
-    return DemonstrationFit(dmps=dmps, initial_index=index, sigma0=exploration_covariance(dmps, ridge, floor), ridge=ridge)
+    return DemonstrationFit(dmps=dmps, initial_index=index, sigma0=exploration_covariance(dmps, ridge, floor),
+                            ridge=ridge, config=config)
 
 
 def initial_weights(dmps: Sequence[Dmp], seed: int) -> tuple[int, np.ndarray]:
