@@ -9,7 +9,8 @@ One process. A skill is fitted first (scripted demonstrations,
 run loads it. Then the skill's initial weights are executed from the same
 object pose by the rollout runner policy search uses
 (``drake_skill.learning.rollout.RolloutRunner``, with its per-step collision
-reflex monitor):
+reflex monitor; the reflex itself is disabled so that every run lasts the
+skill's whole duration):
 
 - ``rtf_plant``: the same diagram with the perception systems removed
   (ground-truth object frame, no goal pipeline) and the camera built but
@@ -114,6 +115,9 @@ def _runner(skill, perception: bool, camera: bool = True):
 
     station_config = scenario_for_skill(skill.name)
     station_config.enable_camera = camera
+    # The collision reflex would stop a pushing imitation part-way; a benchmark
+    # rollout runs its whole duration (the monitor still runs every step).
+    station_config.reflex.enabled = False
     config = RolloutConfig(object_pose="perceived" if perception else "ground_truth", goal_model=perception)
     return RolloutRunner(skill, station_config, config)
 
