@@ -109,11 +109,7 @@ def test_pressing_the_hand_into_the_lid_trips_the_reflex(reflex_sim):
     assert "collision reflex" in str(error)
 
 
-@pytest.mark.parametrize("skill", [
-    pytest.param("open", marks=pytest.mark.xfail(
-        strict=True, reason="issue 10 open: the scripted Open does not yet lift the weighted lid "
-                            "reliably below the 30 N reflex (open.yaml keeps the reflex off)")),
-    "close", "draw"])
+@pytest.mark.parametrize("skill", ["open", "close", "draw"])
 def test_scripted_skills_succeed_on_10_seeds_below_the_reflex_and_parked_fails(skill):
     config = _config(skill)
     config.reflex.enabled = True

@@ -5,13 +5,20 @@ face, x pointing away from the robot (toward the lid hinge / cabinet back),
 y along the object's long side, z up. The hand's TCP frame E is the one the
 station's ``ee_pose_desired`` port takes. Positions are in metres.
 
-* Open: the hand points along +x_O, slides its closed fingertips under the
-  lid's front lip and sweeps them up along the lid's arc about the hinge,
-  pushing the lid past vertical.
-* Close: the hand points down, hooks the finger behind the open lid's outer
-  face and sweeps it forward and down along the arc until the lid is shut.
-* Draw: the hand points down, lowers the closed fingers between the drawer
-  front and the handle bar, and pulls along -x_O.
+* Open: the hand points along +y_O (along the hinge), opens its fingers and
+  slides one of them in from the box's side under the lid's front lip, then
+  turns rigidly with the lid about the hinge axis until the lid is past its
+  tipping angle (it falls open onto its stay by its weight), and leaves
+  sideways.
+* Close: the hand points down, hooks the finger behind the lid resting open
+  on its stay and pulls it forward over its tipping angle; the lid falls shut
+  by its weight while the hand moves up out of its way.
+* Draw: the hand points down, tilted 20 degrees toward the robot, lowers the
+  closed fingers between the drawer front and the handle bar, and pulls along
+  -x_O.
+
+Every motion keeps the robot-scene contact force well below the collision
+reflex (``drake_skill.station.limits``), as ``tools/check_physics.py`` checks.
 
 ``scripted_plan`` maps the keyframes to the world with X_WO and optionally
 perturbs timing and path (seeded), as a human demonstrator would.
@@ -25,13 +32,6 @@ from pydrake.math import RigidTransform, RotationMatrix
 from drake_skill.station.pose_source import PosePlan
 from drake_skill.station.config import SKILLS
 
-# Hand pointing forward along +x_O, fingers spread along y_O, pitched down by
-# OPEN_PITCH. (Pointing level, the Panda runs into joint 6's lower limit while
-# lifting the lid.) It keeps y_E = -y_O, as at the home posture, so reaching
-# it from home is a rotation about y alone.
-OPEN_PITCH = np.deg2rad(60.0)
-R_OE_FORWARD_LEVEL = RotationMatrix(np.array([[0.0, 0.0, 1.0], [0.0, -1.0, 0.0], [1.0, 0.0, 0.0]]))
-R_OE_FORWARD = RotationMatrix.MakeYRotation(OPEN_PITCH) @ R_OE_FORWARD_LEVEL
 # Hand pointing down (-z_O), fingers spread along y_O: the home orientation.
 R_OE_DOWN = RotationMatrix(np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]]))
 
@@ -39,12 +39,15 @@ LID_HINGE_XZ = np.array([0.10, 0.13])   # models/box.sdf
 FINGER_HALF_THICKNESS = 0.011
 TCP_TO_TIP = 0.009                      # fingertips are 9 mm past the TCP
 # Where the fingertip stops under the lid's lip (x in O; the lip spans -0.125..-0.100).
-# Open: the lip's front-bottom edge is LIP_RADIUS from the hinge (models/box.sdf).
-LIP_RADIUS = 0.225
-OPEN_FACE_CONTACT = 0.006   # the face touches the lip edge this far behind the tip [m]
-OPEN_CLEARANCE = 0.005      # the approach stops this far short of the lip edge [m]
-OPEN_PUSH = 0.003           # the sweep presses the face this far into the edge [m]
-OPEN_SWEEP_END = 1.75       # the sweep pushes the lid to this angle [rad], past its tipping angle
+# Open: the hand pointing along +y_O, fingers spread along +x_O, finger
+# thickness (x_E) vertical.
+OPEN_R_OE = RotationMatrix(np.column_stack([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
+OPEN_OPENING = 0.08        # finger opening [m]: one finger under the lip, the other in front of the box
+FINGER_WIDTH = 0.018       # a finger's extent across the opening direction [m]
+OPEN_TIP_Y = -0.11         # fingertip along the lip [m] (the box spans y -0.15..0.15)
+OPEN_CLEARANCE = 0.004     # the finger slides in this far below the lid's underside [m]
+OPEN_PUSH = 0.002          # then presses this far into it as it lifts [m]
+OPEN_SWEEP_END = 1.75      # the lid is carried to this angle [rad], past its tipping angle (1.48)
 # Close: the hand's lean toward the robot per radian the lid is below 1.4 rad (up to 0.8).
 CLOSE_LEAN = 0.8
 CLOSE_START = 1.9       # the lid resting on its stay [rad]
@@ -56,7 +59,7 @@ CLOSE_PUSH = 0.004      # the fingertip path runs this far inside the face [m]
 DRAW_TILT = np.deg2rad(20.0)
 DRAW_TIP_X = -0.176
 DRAW_TIP_Z = 0.125
-DRAW_TRAVEL = 0.19
+DRAW_TRAVEL = 0.16
 
 
 def _arc(theta, radius):
@@ -72,33 +75,33 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
     """Keyframes (time [s], p_OE [m], R_OE, finger opening [m]) after a move from home."""
     frames = []
     if skill == "open":
-        R = RotationMatrix.MakeYRotation(OPEN_PITCH) @ R_OE_FORWARD_LEVEL
-        z_E, x_E = R.col(2), R.col(0)
-        # The finger's upper face (normal x_E) rises behind its tip at the
-        # hand's pitch, so it meets the lip's front-bottom edge before the tip
-        # can get under the lip: the face lifts the lid by that edge. The
-        # contact sits OPEN_FACE_CONTACT behind the tip's upper corner.
-        face_back = -z_E[[0, 2]]
-        normal = x_E[[0, 2]]
-        tip_offset = (TCP_TO_TIP * z_E + FINGER_HALF_THICKNESS * x_E)[[0, 2]]  # TCP -> tip's upper corner
-
-        def tcp(theta, push):
-            corner = _arc(theta, LIP_RADIUS) - OPEN_FACE_CONTACT * face_back + push * normal
-            return _xyz(corner - tip_offset)
-
-        start = tcp(0.0, -OPEN_CLEARANCE)
-        # Turn the hand at height first (descending while turning folds the
-        # elbow into joint 4's limit), then down in front of the lip and in.
-        frames += [(1.5, start + [-0.05, 0.0, 0.16], R, 0.0),
-                   (2.5, start + [-0.05, 0.0, 0.0], R, 0.0),
-                   (3.5, start, R, 0.0),
-                   (4.0, start, R, 0.0)]    # a pause, as a person makes before lifting
+        # The hand points along +y_O, level, fingers open and spread along x_O,
+        # and slides one finger in from the box's side under the lip (the
+        # finger's flat top face under the lid's underside; the other finger
+        # passes in front of the box). The hand then turns rigidly with the lid
+        # about the hinge axis (a roll of the hand about its own axis, joint 7)
+        # until the lid is past its tipping angle, and leaves sideways.
+        R0 = OPEN_R_OE
+        hinge = _xyz(LID_HINGE_XZ)
+        # Finger under the lip: across x -0.1215..-0.1035 (the lip spans
+        # -0.125..-0.100), its tip OPEN_TIP_Y along the lip from the box's side.
+        tcp_in = np.array([-0.1125 - (OPEN_OPENING / 2 + FINGER_WIDTH / 2), OPEN_TIP_Y - TCP_TO_TIP,
+                           0.13 - FINGER_HALF_THICKNESS - OPEN_CLEARANCE])
+        tcp_touch = tcp_in + [0.0, 0.0, OPEN_CLEARANCE + OPEN_PUSH]
+        out = [0.0, -0.09, 0.0]
+        w = OPEN_OPENING
+        # Turn the hand high beside the box, then down and in.
+        frames += [(1.5, tcp_in + out + [0.0, 0.0, 0.20], R0, w),
+                   (2.5, tcp_in + out + [0.0, 0.0, 0.06], R0, w),
+                   (3.2, tcp_in + out, R0, w),
+                   (4.0, tcp_in, R0, w),
+                   (4.5, tcp_in, R0, w)]      # a pause, as a person makes before lifting
         for i, theta in enumerate(np.linspace(0.0, OPEN_SWEEP_END, 9)):
-            frames.append((4.5 + 0.5 * i, tcp(theta, OPEN_PUSH), R, 0.0))
-        last = frames[-1][1]
-        # Leave upward first, then back: retreating straight back drags the lid.
-        frames += [(9.0, last + [0.0, 0.0, 0.06], R, 0.0),
-                   (10.0, last + [-0.15, 0.0, 0.08], R, 0.0)]
+            R_lid = RotationMatrix.MakeYRotation(theta)
+            frames.append((5.0 + 0.5 * i, hinge + R_lid @ (tcp_touch - hinge), R_lid @ R0, w))
+        last_p, last_R = frames[-1][1], frames[-1][2]
+        frames += [(10.0, last_p + out, last_R, w),
+                   (11.0, last_p + out + [-0.05, 0.0, 0.08], last_R, w)]
     elif skill == "close":
         radius, push = 0.19, CLOSE_PUSH
         theta0 = CLOSE_START
@@ -144,8 +147,8 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
                    (7.0, out, R, 0.0),
                    # lift clear of the handle (never pushing the drawer back), then
                    # away from the robot's base, where the arm can settle
-                   (8.0, out + [-0.01, 0.0, 0.10], R, 0.0),
-                   (8.8, out + [0.05, 0.0, 0.20], R, 0.0)]
+                   (7.8, out + [0.0, 0.0, 0.05], R, 0.0),
+                   (8.8, out + [0.10, 0.0, 0.16], R, 0.0)]
     else:
         raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
     return frames
