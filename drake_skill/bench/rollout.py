@@ -23,7 +23,10 @@ skill's whole duration):
 - ``ratio`` = ``rtf_full / rtf_plant`` (the issue asks >= 0.4).
 
 Real-time factor = simulated s / wall s, over the whole rollout (``tau`` +
-the settle time), after a short warm-up (the renderer's first frame).
+the settle time), after a short warm-up (the renderer's first frame). The
+plant and the whole chain run alternately ``--repeats`` times (default 3) and
+the fastest run of each counts: on a machine shared with other work that is
+the least disturbed one.
 The breakdown (``breakdown_ms_per_s``: ms of wall time per simulated second)
 is measured in the full run itself, by timing the perception systems'
 callbacks (patched on their classes for the run, exclusive of what they
@@ -152,7 +155,7 @@ def _perception_ports(station, pipeline) -> dict:
 
 
 def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Path = DEFAULT_CACHE,
-        progress: bool = False) -> dict:
+        progress: bool = False, repeats: int = 3) -> dict:
     import logging
 
     import torch
@@ -163,7 +166,7 @@ def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Pa
     from drake_skill.reward.systems import PomrpReward
 
     skill = fitted_skill(skill_name, seed, cache, progress)
-    plant = _run(_runner(skill, perception=False), skill, object_seed)
+    plant_runner = _runner(skill, perception=False)
     no_camera = _run(_runner(skill, perception=False, camera=False), skill, object_seed)
 
     timers = _Timers()
@@ -190,7 +193,16 @@ def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Pa
         runner = _runner(skill, perception=True)
         rig.update(station=runner.station, context=runner.context,
                    ports=_perception_ports(runner.station, runner.pipeline))
-        full = _run(runner, skill, object_seed, timers)
+        # Plant and whole chain alternately, ``repeats`` times each; the least disturbed
+        # (fastest) run of each counts, its own breakdown with it.
+        plant, full, best = None, None, None
+        for _ in range(max(1, repeats)):
+            p = _run(plant_runner, skill, object_seed)
+            plant = p if plant is None or p["wall_s"] < plant["wall_s"] else plant
+            f = _run(runner, skill, object_seed, timers)
+            if full is None or f["wall_s"] < full["wall_s"]:
+                full, best = f, (dict(timers.total), dict(timers.calls))
+        timers.total, timers.calls = best
     finally:
         for u in undo:
             u()
@@ -202,7 +214,7 @@ def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Pa
     camera = getattr(runner.station, "object_camera", None)
     window = camera.window if camera is not None else None
     return {
-        "skill": skill_name, "skill_seed": seed, "object_seed": object_seed,
+        "skill": skill_name, "skill_seed": seed, "object_seed": object_seed, "repeats": max(1, repeats),
         "simulated_s": round(full["simulated_s"], 3),
         "rtf_plant": round(plant["rtf"], 3), "rtf_full": round(full["rtf"], 3),
         "ratio": round(full["rtf"] / plant["rtf"], 3), "ratio_required": RATIO_REQUIRED,
@@ -284,6 +296,8 @@ def main(argv=None) -> int:
     parser.add_argument("--seed", type=int, default=0, help="demonstrator seed of the fitted skill")
     parser.add_argument("--object-seed", type=int, default=3, help="object pose of the timed rollout")
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE, help="where the fitted skill is kept")
+    parser.add_argument("--repeats", type=int, default=3,
+                        help="runs of each case, alternating; the fastest of each counts")
     parser.add_argument("--encode-variants", action="store_true",
                         help="only time the PCAE encoder's inference variants (see encode_variants)")
     args = parser.parse_args(argv)
@@ -294,7 +308,10 @@ def main(argv=None) -> int:
         return 0
     if args.cache.exists() and not args.cache.is_dir():
         raise NotADirectoryError(f"--cache {args.cache}: not a directory; give a directory for the fitted skill")
-    result = run(args.skill, args.seed, args.object_seed, args.cache, progress=not args.json)
+    if args.repeats < 1:
+        raise ValueError(f"--repeats {args.repeats}: expected at least 1 run per case")
+    result = run(args.skill, args.seed, args.object_seed, args.cache, progress=not args.json,
+                 repeats=args.repeats)
     if args.json:
         print(json.dumps(result))
         return 0
