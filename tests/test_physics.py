@@ -153,3 +153,34 @@ def test_no_robot_self_collision_at_home():
     pairs = query.ComputePointPairPenetration()
     inspector = query.inspector()
     assert [(inspector.GetName(p.id_A), inspector.GetName(p.id_B)) for p in pairs] == []
+
+
+def test_exploratory_rollouts_end_without_solver_failure():
+    """Rollouts of DMP weights sampled from Sigma_0 of DMPs fitted to scripted Close
+    demonstrations (the skill's exploration at the start of policy search): none ends
+    in a solver failure or divergence; the only allowed early end is the reflex.
+    (tools/check_physics.py-style runs of 100 such rollouts: see the issue notes.)"""
+    from drake_skill.action.dmp import fit_demonstrations
+    from drake_skill.demos.demonstrator import DemonstratorConfig, ScriptedDemonstrator
+    from drake_skill.learning.rollout import ActionModel, RolloutConfig, RolloutRunner
+    from drake_skill.skill import default_skill_config
+
+    config = _config("close")
+    demos = ScriptedDemonstrator("close", DemonstratorConfig(record_perception=False), config).record_many(
+        progress=False)
+    skill_config = default_skill_config("close")
+    fit = fit_demonstrations([(d.times, d.X_OE) for d in demos], skill_config.dmp, seed=skill_config.seed,
+                             ridge=skill_config.dmp_ridge)
+    runner = RolloutRunner(ActionModel("close", fit.dmps[0], skill_config.dmp), config,
+                           RolloutConfig(object_pose="ground_truth", goal_model=False))
+    rng = np.random.default_rng(3)
+    W0 = fit.dmps[fit.initial_index].weights
+    L = np.linalg.cholesky(fit.sigma0)
+    outcomes = []
+    for k in range(12):
+        W = W0 + np.einsum("bij,bj->bi", L, rng.standard_normal(W0.shape))
+        result = runner.run(W, 500 + k)
+        # The runner turns the station's exceptions into a reason; only the reflex is allowed.
+        assert not result.failed or result.reason == "reflex", f"rollout {k}: {result.reason}: {result.message}"
+        outcomes.append(result.reason or "completed")
+    assert len(outcomes) == 12
