@@ -28,9 +28,9 @@ Equations (one controlled dimension; all dimensions share the phase):
   the last basis reuses the previous width. ``psi_b`` at a neighbour's centre
   is ``exp(-width_scale)``. The default ``width_scale = 4`` (0.018 there)
   rather than the common 1 (0.37): with per-basis LWR the wider bases smooth
-  the forcing term twice (in the regression and in the normalised mixture);
-  on a 0.3 m minimum-jerk demonstration with B = 20 the position RMSE is
-  2.3 mm with 1, 0.7 mm with 4, 0.55 mm with 8 (B = 10: 7.1, 2.4, 2.1 mm);
+  the forcing term twice (in the regression and in the normalised mixture),
+  and narrower ones reproduce a demonstration more closely (docs/method.md
+  section 2 has the measured errors);
 - amplitude ``a`` (docs/method.md section 2, "Amplitude"). Default
   (``scale_by_amplitude=False``): per weight column, ``a = g - y0`` (no
   floor) in the columns of ``DmpConfig.scaled_dims`` and ``a = 1`` (no
@@ -822,8 +822,8 @@ def _quaternion_rows(out: np.ndarray, idx: np.ndarray, frac: np.ndarray) -> np.n
 
 def _ude_steps_single(q0, goal, forcing, K: float, D: float, dt_tau: float, n: int) -> np.ndarray:
     """Same recursion as the batched loop above for one trajectory, on Python
-    floats: numpy's per-call overhead dominates for (4,)-sized arrays, and this
-    is about 6x faster. Returns (n+1, 4)."""
+    floats: numpy's per-call overhead dominates for (4,)-sized arrays.
+    Returns (n+1, 4)."""
     gw, gx, gy, gz = (float(v) for v in goal)
     w, x, y, z = (float(v) for v in q0)
     ex = ey = ez = 0.0  # eta

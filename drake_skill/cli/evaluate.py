@@ -42,7 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ground-truth-pose", action="store_true",
                         help="object frame from the simulator's ground truth instead of the segmenter")
     parser.add_argument("--all-demos", action="store_true", help="evaluate every demonstration's DMP")
-    parser.add_argument("--station-config", type=Path, help="StationConfig YAML (default: the skill's scenario)")
+    parser.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE", help="scenario YAML (StationConfig; default: the skill's scenario)")
     parser.add_argument("--out", type=Path, default=None, help="JSON report (default SKILL/evaluation.json)")
     parser.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
