@@ -1,7 +1,9 @@
 """What every box shares, with no Drake import: the skill names, the size of an
-object cloud, the camera's look-at pose."""
+object cloud, the camera's look-at pose, the counter of differential-IK warnings."""
 
 from __future__ import annotations
+
+import logging
 
 import numpy as np
 
@@ -37,3 +39,23 @@ def look_at(eye, target, roll_rad: float = 0.0) -> np.ndarray:
     X[:3, :3] = np.stack([right, down, fwd], axis=1) @ roll
     X[:3, 3] = eye
     return X
+
+
+class IkWarningCounter(logging.Filter):
+    """Counts differential IK's "no solution"/"stuck" warnings on the ``drake`` logger.
+
+    They come whenever a commanded hand pose is out of reach (a DMP exploring
+    far from the demonstrations does that). ``suppress=True`` also keeps them
+    from printing (the command line, unless ``--verbose``); otherwise they pass.
+    """
+
+    def __init__(self, suppress: bool = False):
+        super().__init__()
+        self.suppress = suppress
+        self.count = 0
+
+    def filter(self, record):
+        if "Differential IK" in record.getMessage():
+            self.count += 1
+            return not self.suppress
+        return True

@@ -31,6 +31,8 @@ import traceback
 
 import yaml
 
+from drake_skill.common import IkWarningCounter
+
 #: Command modules in the order ``--help`` lists them (missing ones are skipped).
 COMMANDS = ["station_demo", "demos", "fit", "learn", "evaluate", "bench", "hardware", "sim_robot"]
 
@@ -119,25 +121,6 @@ def _plain_parser(parser: argparse.ArgumentParser) -> None:
                 _plain_parser(sub)
 
 
-class _QuietDiffIk(logging.Filter):
-    """Counts, instead of printing, differential IK's "no solution"/"stuck" warnings.
-
-    They come whenever a commanded hand pose is out of reach (a DMP exploring
-    far from the demonstrations does that); one line per episode drowns the
-    progress bars. ``--verbose`` shows them all.
-    """
-
-    def __init__(self):
-        super().__init__()
-        self.count = 0
-
-    def filter(self, record):
-        if "Differential IK" in record.getMessage():
-            self.count += 1
-            return False
-        return True
-
-
 def one_line(error: BaseException) -> str:
     """The message of a user error on one line."""
     text = str(error) or type(error).__name__
@@ -149,7 +132,7 @@ def one_line(error: BaseException) -> str:
 def main(argv=None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     verbose = "--verbose" in argv  # known before parsing, so parse errors honour it too
-    quiet = _QuietDiffIk()
+    quiet = IkWarningCounter(suppress=True)
     if not verbose:
         logging.getLogger("drake").addFilter(quiet)
     try:

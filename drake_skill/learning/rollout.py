@@ -55,6 +55,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantVectorSource
 
+from drake_skill.common import IkWarningCounter
 from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
 from drake_skill.station import simulation as _simulation
@@ -278,19 +279,6 @@ class ObjectPoseSource(LeafSystem):
         output.set_value(context.get_abstract_parameter(self._index).get_value())
 
 
-class _IkWarningCounter(logging.Filter):
-    """Counts differential IK's warnings on the ``drake`` logger (lets them through)."""
-
-    def __init__(self):
-        super().__init__()
-        self.count = 0
-
-    def filter(self, record):
-        if "Differential IK" in record.getMessage():
-            self.count += 1
-        return True
-
-
 class RolloutRunner:
     """One diagram (station + object pose + DMP + goal pipeline) reused for every rollout.
 
@@ -433,7 +421,7 @@ class RolloutRunner:
         if not np.all(np.isfinite(weights)):
             raise ValueError("weights: contain NaN or inf")
         seed = int(seed)
-        counter = _IkWarningCounter()
+        counter = IkWarningCounter()
         logger = logging.getLogger("drake")
         logger.filters.insert(0, counter)   # ahead of filters that drop the records
         start = time.perf_counter()
