@@ -47,13 +47,21 @@ def test_cropped_render_equals_the_crop_of_the_full_frame(skill):
         depth, full_depth = port["object_depth_image"].Eval(context).data, window.crop(port["depth_image"].Eval(context).data)
         both = np.isfinite(depth) & np.isfinite(full_depth)
         assert np.count_nonzero(np.isfinite(depth) != np.isfinite(full_depth)) <= 3
-        assert np.max(np.abs(depth[both] - full_depth[both])) < 1e-3
+        # Within 1 mm at every pixel both label alike; a pixel the two label differently sits
+        # on an edge and may see the other surface (measured: 1 pixel, drawer at t = 5 s, 2.9 cm).
+        same = both & (labels == window.crop(port["label_image"].Eval(context).data[..., 0]))[..., None]
+        assert np.max(np.abs(depth[same] - full_depth[same])) < 1e-3
+        assert np.count_nonzero(np.abs(depth[both] - full_depth[both]) >= 1e-3) <= 3
         # The cloud the segmenter reads: the crop of the full-frame cloud, within 1 mm.
         h, w = window.shape
         xyz = port["object_point_cloud"].Eval(context).xyzs().T.reshape(h, w, 3)
         full_xyz = window.crop(port["point_cloud"].Eval(context).xyzs().T.reshape(480, 640, 3))
         ok = np.isfinite(xyz).all(-1) & np.isfinite(full_xyz).all(-1)
-        assert ok.sum() > 0.5 * h * w and np.max(np.abs(xyz[ok] - full_xyz[ok])) < 1e-3
+        assert ok.sum() > 0.5 * h * w
+        # the same edge-pixel rule as the depth above (the cloud is the depth back-projected)
+        ok_same = ok & same[..., 0]
+        assert np.max(np.abs(xyz[ok_same] - full_xyz[ok_same])) < 1e-3
+        assert np.count_nonzero(np.abs(xyz[ok] - full_xyz[ok]).max(-1) >= 1e-3) <= 3
         # Colour: within one grey level off edges. On edges VTK's colour pass
         # anti-aliases (FXAA, a screen-space filter whose edge search reaches across
         # the window's border), so a few edge pixels differ (measured <= 0.15 %).
