@@ -23,7 +23,17 @@ from drake_skill.station.scripted import keyframes, scripted_plan
 from drake_skill.station.simulation import StationSimulation
 from drake_skill.station.config import scenario_for_skill
 
-logging.getLogger("drake").setLevel(logging.ERROR)   # diff-IK "stuck" chatter
+
+@pytest.fixture(autouse=True, scope="module")
+def _quiet_differential_ik():
+    """Differential IK's warnings off for this module's tests only (set at import, it
+    would hide them from every later test: the rollout runner counts them)."""
+    logger = logging.getLogger("drake")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    yield
+    logger.setLevel(level)
+
 
 
 def _fast(**kw) -> DemonstratorConfig:

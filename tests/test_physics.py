@@ -13,7 +13,17 @@ from drake_skill.station.pose_source import PosePlan, hold_plan
 from drake_skill.station.scripted import scripted_plan
 from drake_skill.station.simulation import ReflexError, StationSimulation
 
-logging.getLogger("drake").setLevel(logging.ERROR)
+
+@pytest.fixture(autouse=True, scope="module")
+def _quiet_differential_ik():
+    """Differential IK's warnings off for this module's tests only (set at import, it
+    would hide them from every later test: the rollout runner counts them)."""
+    logger = logging.getLogger("drake")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    yield
+    logger.setLevel(level)
+
 
 #: The lid's tipping angle [rad]: its centre of mass (-0.1125, 0.01) m from the
 #: hinge in the lid frame is above the hinge at atan(0.1125 / 0.01).

@@ -26,7 +26,17 @@ from drake_skill.demos.teleop import (
     teleop_step,
 )
 
-logging.getLogger("drake").setLevel(logging.ERROR)
+
+@pytest.fixture(autouse=True, scope="module")
+def _quiet_differential_ik():
+    """Differential IK's warnings off for this module's tests only (set at import, it
+    would hide them from every later test: the rollout runner counts them)."""
+    logger = logging.getLogger("drake")
+    level = logger.level
+    logger.setLevel(logging.ERROR)
+    yield
+    logger.setLevel(level)
+
 
 SLIDER = {name.split()[0]: name for name, _, _ in SLIDERS}
 HOME = RigidTransform(RollPitchYaw(np.pi, 0.0, 0.0), [0.4, 0.0, 0.5])
