@@ -1,7 +1,6 @@
 """Scripted demonstrator: successful, deterministic demonstrations in the object frame; perception at 10 Hz."""
 
 import dataclasses as dc
-import logging
 
 import numpy as np
 import pytest
@@ -24,15 +23,7 @@ from drake_skill.station.simulation import StationSimulation
 from drake_skill.station.config import scenario_for_skill
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _quiet_differential_ik():
-    """Differential IK's warnings off for this module's tests only (set at import, it
-    would hide them from every later test: the rollout runner counts them)."""
-    logger = logging.getLogger("drake")
-    level = logger.level
-    logger.setLevel(logging.ERROR)
-    yield
-    logger.setLevel(level)
+pytestmark = pytest.mark.usefixtures("quiet_differential_ik")
 
 
 

@@ -1,6 +1,5 @@
 """A physically honest station (issue 10): weight, reflex, rate limits, solver at rest, judges."""
 
-import logging
 import math
 
 import numpy as np
@@ -14,15 +13,7 @@ from drake_skill.station.scripted import scripted_plan
 from drake_skill.station.simulation import ReflexError, StationSimulation
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _quiet_differential_ik():
-    """Differential IK's warnings off for this module's tests only (set at import, it
-    would hide them from every later test: the rollout runner counts them)."""
-    logger = logging.getLogger("drake")
-    level = logger.level
-    logger.setLevel(logging.ERROR)
-    yield
-    logger.setLevel(level)
+pytestmark = pytest.mark.usefixtures("quiet_differential_ik")
 
 
 #: The lid's tipping angle [rad]: its centre of mass (-0.1125, 0.01) m from the

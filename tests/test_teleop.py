@@ -2,7 +2,6 @@
 through a real Meshcat (no browser: slider values set and button clicks / gamepad injected as the
 browser's websocket messages, as Drake's own Meshcat tests do)."""
 
-import logging
 import struct
 
 import numpy as np
@@ -27,15 +26,7 @@ from drake_skill.demos.teleop import (
 )
 
 
-@pytest.fixture(autouse=True, scope="module")
-def _quiet_differential_ik():
-    """Differential IK's warnings off for this module's tests only (set at import, it
-    would hide them from every later test: the rollout runner counts them)."""
-    logger = logging.getLogger("drake")
-    level = logger.level
-    logger.setLevel(logging.ERROR)
-    yield
-    logger.setLevel(level)
+pytestmark = pytest.mark.usefixtures("quiet_differential_ik")
 
 
 SLIDER = {name.split()[0]: name for name, _, _ in SLIDERS}
