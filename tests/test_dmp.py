@@ -44,7 +44,7 @@ def test_config_loads_from_yaml():
     from pydrake.common.yaml import yaml_load_typed
 
     cfg = yaml_load_typed(schema=DmpConfig, data="n_basis: 10\nquaternion: ude\nK: 64.0\nD: 16.0\n")
-    assert (cfg.n_basis, cfg.quaternion, cfg.K, cfg.D, cfg.width_scale) == (10, "ude", 64.0, 16.0, 4.0)
+    assert (cfg.n_basis, cfg.quaternion, cfg.K, cfg.D, cfg.width_scale) == (10, "ude", 64.0, 16.0, 1.0)
     assert cfg.weight_dim == 6
     assert math.isclose(phase(1.0, 1.0, DmpConfig().alpha_x), 0.01)
 
@@ -104,7 +104,7 @@ def test_recovers_weights_of_a_dmp_generated_trajectory():
     assert np.abs(w_fit - w).max() < 0.03  # |w| up to 2.4; residual from numerical derivatives
     # LWR (the thesis' regression) is exact when the weights do not vary over the bases
     w_const = np.tile(rng.normal(0.0, 1.0, 7), (20, 1))
-    cfg_lwr = DmpConfig()
+    cfg_lwr = DmpConfig(regression="lwr", width_scale=4.0)
     y = integrate(Dmp(w_const, Y0, GOAL, 3.0), cfg_lwr, t, normalize_quaternion=False)
     w_lwr = fit_weights(t, y, cfg_lwr, y0=Y0, goal=GOAL)
     # (0.011 on the first basis, from the one-sided second derivative at t = 0; 1.4e-4 elsewhere)

@@ -26,11 +26,11 @@ Equations (one controlled dimension; all dimensions share the phase):
   centres ``c_b = exp(-alpha_x * linspace(0, 1, B))`` (equally spaced in
   time over [0, tau]) and widths ``h_b = width_scale / (c_{b+1} - c_b)^2``;
   the last basis reuses the previous width. ``psi_b`` at a neighbour's centre
-  is ``exp(-width_scale)``. The default ``width_scale = 4`` (0.018 there)
-  rather than the common 1 (0.37): with per-basis LWR the wider bases smooth
-  the forcing term twice (in the regression and in the normalised mixture),
-  and narrower ones reproduce a demonstration more closely (docs/method.md
-  section 2 has the measured errors);
+  is ``exp(-width_scale)``. With per-basis LWR (``regression="lwr"``)
+  ``width_scale = 4`` (0.018 there) suits better than the common 1 (0.37):
+  wider bases smooth the forcing term twice (in the regression and in the
+  normalised mixture). The default global least-squares fit uses 1
+  (docs/method.md section 2 has the measured errors);
 - amplitude ``a`` (docs/method.md section 2, "Amplitude"). Default
   (``scale_by_amplitude=False``): per weight column, ``a = g - y0`` (no
   floor) in the columns of ``DmpConfig.scaled_dims`` and ``a = 1`` (no
@@ -57,11 +57,15 @@ Equations (one controlled dimension; all dimensions share the phase):
       w_b = (s^T Gamma_b f_target) / (s^T Gamma_b s),  s_t = x_t a,
       Gamma_b = diag(psi_b(x_t))
 
-  (locally weighted regression per basis, ``regression="lwr"``); derivatives
-  are numerical (``numpy.gradient``, second order, non-uniform times
-  allowed). ``regression="least_squares"`` instead solves the global least
-  squares problem for the normalised basis mixture, which recovers weights
-  exactly when the data come from the DMP itself.
+  (locally weighted regression per basis, ``regression="lwr"``, the
+  thesis's form); derivatives are numerical (``numpy.gradient``, second
+  order, non-uniform times allowed). The default,
+  ``regression="least_squares"``, instead solves the global least squares
+  problem ``min_W sum_t |phi(x_t) (W * a) - f_target(t)|^2`` for the
+  normalised basis mixture (docs/method.md section 2, a decision: it
+  reproduces the demonstrated path several times more closely with the
+  thesis's B, and recovers weights exactly when the data come from the DMP
+  itself).
 
 Quaternion handling (``DmpConfig.quaternion``):
 
@@ -163,14 +167,16 @@ class DmpConfig:
     D: float = 20.0
     #: Canonical-system decay; ln(100) gives x(tau) = 0.01.
     alpha_x: float = math.log(100.0)
-    #: Basis widths h_b = width_scale / (c_{b+1} - c_b)^2 (see module docstring).
-    width_scale: float = 4.0
+    #: Basis widths h_b = width_scale / (c_{b+1} - c_b)^2 (see module docstring);
+    #: 1 for the default least-squares fit, 4 suits "lwr" (docs/method.md section 2).
+    width_scale: float = 1.0
     #: Internal integration step, s.
     dt: float = 0.001
     #: Orientation formulation: "vector" (thesis) or "ude" (Ude et al. 2014).
     quaternion: str = "vector"
-    #: Weight regression: "lwr" (docs/method.md, thesis Eq. 3.9) or "least_squares".
-    regression: str = "lwr"
+    #: Weight regression: "least_squares" (default, docs/method.md section 2) or
+    #: "lwr" (per-basis locally weighted regression, thesis Eq. 3.9).
+    regression: str = "least_squares"
     #: Scale the forcing term by the amplitude a = g - y0 (thesis Eq. 3.4). Off by
     #: default: that form flips the motion where g - y0 changes sign (module docstring).
     scale_by_amplitude: bool = False

@@ -78,6 +78,11 @@ class DemonstratorConfig:
     pause_range: its duration, uniform in [min, max] [s].
     overshoot: the approach (first move from home) goes this far past its
       target before settling back [m]; scaled by a uniform factor in [0.5, 1].
+    follow_through_range: how far the motion carries the object, a fraction
+      drawn uniform in [min, max] per demonstration
+      (``drake_skill.station.scripted.FOLLOW_THROUGH``: 0 just past the
+      tipping angle or travel threshold, 1 the scripted motion), as a person
+      stops pushing once the object looks done.
     settle_time: the last keyframe is held this long before the recording ends [s]
       (at least the scenario's ``success.settle_time``, the judge's settle phase).
     max_attempts: seeds tried per demonstration before giving up.
@@ -101,6 +106,7 @@ class DemonstratorConfig:
     pause_probability: float = 0.5
     pause_range: list[float] = dc.field(default_factory=lambda: [0.2, 0.8])
     overshoot: float = 0.02
+    follow_through_range: list[float] = dc.field(default_factory=lambda: [0.2, 1.0])
     settle_time: float = 0.5
     max_attempts: int = 10
     record_hz: float = 100.0
@@ -124,6 +130,9 @@ class DemonstratorConfig:
             bad("pause_probability", self.pause_probability, "a probability in [0, 1]")
         if len(self.pause_range) != 2 or not 0 <= self.pause_range[0] <= self.pause_range[1]:
             bad("pause_range", self.pause_range, "[min, max] with 0 <= min <= max [s]")
+        r = self.follow_through_range
+        if len(r) != 2 or not 0.0 <= r[0] <= r[1] <= 1.0:
+            bad("follow_through_range", r, "[min, max] with 0 <= min <= max <= 1")
         if self.max_attempts < 1:
             bad("max_attempts", self.max_attempts, "at least 1")
         if not (self.action_hz > 0 and self.record_hz >= self.action_hz):
@@ -172,6 +181,8 @@ def humanlike_plan(skill: str, X_WO: RigidTransform, X_WE_home: RigidTransform, 
     pause_at = int(rng.integers(0, n)) if rng.uniform() < config.pause_probability else -1
     pause = float(rng.uniform(*config.pause_range))
     overshoot = config.overshoot * float(rng.uniform(0.5, 1.0))
+    follow_through = float(rng.uniform(*config.follow_through_range))   # drawn last: the others keep their values
+    frames = keyframes(skill, follow_through)
 
     times, poses, grip = [0.0], [X_WE_home], [float(frames[0][3])]
     t, t_key_prev = 0.0, 0.0
@@ -202,7 +213,7 @@ def humanlike_plan(skill: str, X_WO: RigidTransform, X_WE_home: RigidTransform, 
             grip.append(float(opening))
     variation = {"grasp_offset_m": offset.tolist(), "time_scales": scales.tolist(),
                  "pause_after_keyframe": pause_at, "pause_s": pause if pause_at >= 0 else 0.0,
-                 "overshoot_m": overshoot}
+                 "overshoot_m": overshoot, "follow_through": follow_through}
     return PosePlan.from_poses(times, poses, grip), variation
 
 

@@ -47,6 +47,7 @@ FINGER_WIDTH = 0.018       # a finger's extent across the opening direction [m]
 OPEN_TIP_Y = -0.11         # fingertip along the lip [m] (the box spans y -0.15..0.15)
 OPEN_CLEARANCE = 0.004     # the finger slides in this far below the lid's underside [m]
 OPEN_PUSH = 0.002          # then presses this far into it as it lifts [m]
+OPEN_TURN_TIME = 3.0      # the move from home, turning the hand 120 degrees [s]
 OPEN_SWEEP_END = 1.75      # the lid is carried to this angle [rad], past its tipping angle (1.48)
 # Close: the hand's lean toward the robot per radian the lid is below 1.4 rad (up to 0.8).
 CLOSE_LEAN = 0.8
@@ -71,8 +72,26 @@ def _xyz(xz):
     return np.array([xz[0], 0.0, xz[1]])
 
 
-def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float]]:
-    """Keyframes (time [s], p_OE [m], R_OE, finger opening [m]) after a move from home."""
+# How far each motion carries the object, at follow_through 0 (just past what
+# succeeds) and 1 (the scripted motion): the lid's angle at the end of the
+# Open sweep [rad], the lid's angle where Close lets go [rad], the drawer's
+# travel [m].
+FOLLOW_THROUGH = {"open": (1.58, OPEN_SWEEP_END), "close": (1.38, CLOSE_RELEASE), "draw": (0.12, DRAW_TRAVEL)}
+
+
+def keyframes(skill: str, follow_through: float = 1.0) -> list[tuple[float, np.ndarray, RotationMatrix, float]]:
+    """Keyframes (time [s], p_OE [m], R_OE, finger opening [m]) after a move from home.
+
+    ``follow_through`` in [0, 1] sets how far the motion carries the object
+    (``FOLLOW_THROUGH``: 1 is the scripted motion, 0 just past the tipping
+    angle or the travel threshold), as a person stops pushing once the
+    object looks done.
+    """
+    if not 0.0 <= follow_through <= 1.0:
+        raise ValueError(f"follow_through: expected a fraction in [0, 1], got {follow_through!r}")
+    if skill in FOLLOW_THROUGH:
+        lo, hi = FOLLOW_THROUGH[skill]
+        carry = lo + follow_through * (hi - lo)
     frames = []
     if skill == "open":
         # The hand points along +y_O, level, fingers open and spread along x_O,
@@ -91,17 +110,21 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
         out = [0.0, -0.09, 0.0]
         w = OPEN_OPENING
         # Turn the hand high beside the box, then down and in.
-        frames += [(1.5, tcp_in + out + [0.0, 0.0, 0.20], R0, w),
-                   (2.5, tcp_in + out + [0.0, 0.0, 0.06], R0, w),
-                   (3.2, tcp_in + out, R0, w),
-                   (4.0, tcp_in, R0, w),
-                   (4.5, tcp_in, R0, w)]      # a pause, as a person makes before lifting
-        for i, theta in enumerate(np.linspace(0.0, OPEN_SWEEP_END, 9)):
+        # The turn takes OPEN_TURN_TIME: turned faster, the arm swings through
+        # the shoulder singularity and the measured path (which the DMP
+        # imitates) loops far from the commanded one.
+        t0 = OPEN_TURN_TIME
+        frames += [(t0, tcp_in + out + [0.0, 0.0, 0.20], R0, w),
+                   (t0 + 1.0, tcp_in + out + [0.0, 0.0, 0.06], R0, w),
+                   (t0 + 1.7, tcp_in + out, R0, w),
+                   (t0 + 2.5, tcp_in, R0, w),
+                   (t0 + 3.0, tcp_in, R0, w)]      # a pause, as a person makes before lifting
+        for i, theta in enumerate(np.linspace(0.0, carry, 9)):
             R_lid = RotationMatrix.MakeYRotation(theta)
-            frames.append((5.0 + 0.5 * i, hinge + R_lid @ (tcp_touch - hinge), R_lid @ R0, w))
+            frames.append((t0 + 3.5 + 0.5 * i, hinge + R_lid @ (tcp_touch - hinge), R_lid @ R0, w))
         last_p, last_R = frames[-1][1], frames[-1][2]
-        frames += [(10.0, last_p + out, last_R, w),
-                   (11.0, last_p + out + [-0.05, 0.0, 0.08], last_R, w)]
+        frames += [(t0 + 8.5, last_p + out, last_R, w),
+                   (t0 + 9.5, last_p + out + [-0.05, 0.0, 0.08], last_R, w)]
     elif skill == "close":
         radius, push = 0.19, CLOSE_PUSH
         theta0 = CLOSE_START
@@ -125,12 +148,12 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
                    (4.0, start, hand(theta0), 0.0)]
         # Pull the lid off its stay and over its tipping angle; past it, its
         # weight shuts it (the hand must not chase and press it).
-        for i, theta in enumerate(np.linspace(theta0, CLOSE_RELEASE, 5)[1:]):
+        for i, theta in enumerate(np.linspace(theta0, carry, 5)[1:]):
             frames.append((4.0 + 0.5 * (i + 1), tcp(theta), hand(theta), 0.0))
         last = frames[-1][1]
         # Up, out of the falling lid's way, and toward the hinge.
-        frames += [(6.5, last + [0.0, 0.0, 0.08], hand(CLOSE_RELEASE), 0.0),
-                   (7.5, last + [0.06, 0.0, 0.14], hand(CLOSE_RELEASE), 0.0)]
+        frames += [(6.5, last + [0.0, 0.0, 0.08], hand(carry), 0.0),
+                   (7.5, last + [0.06, 0.0, 0.14], hand(carry), 0.0)]
     elif skill == "draw":
         # Tilted so the fingertips lead toward the drawer front and the hand
         # housing trails toward the robot, clear of the cabinet's top edge
@@ -140,7 +163,7 @@ def keyframes(skill: str) -> list[tuple[float, np.ndarray, RotationMatrix, float
         z_E = R.col(2)
         tip = np.array([DRAW_TIP_X, 0.0, DRAW_TIP_Z])
         tcp = tip - TCP_TO_TIP * z_E
-        out = tcp - [DRAW_TRAVEL, 0.0, 0.0]
+        out = tcp - [carry, 0.0, 0.0]
         frames += [(2.5, tcp + [0.0, 0.0, 0.16], R, 0.0),
                    (3.5, tcp, R, 0.0),
                    (4.0, tcp, R, 0.0),
