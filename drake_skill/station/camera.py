@@ -12,9 +12,27 @@ by the crop's corner,
 so pixel (u', v') of the object camera is pixel (x0 + u', y0 + v') of the full
 frame (a pinhole ``u = fx X / Z + cx``: shifting the principal point only
 shifts the pixel indices). Its images and its organised point cloud are
-therefore the matching crop of the full-frame ones, at a fraction of the
-rendering and cloud cost. The full-frame camera stays for pictures, Meshcat
-and the demonstration images.
+therefore the matching crop of the full-frame ones (up to rounding, below), at
+a fraction of the rendering and cloud cost. The full-frame camera stays for
+pictures, Meshcat and the demonstration images.
+
+**Colour** (:class:`CroppedColorCamera`). RenderEngineVtk ends its colour pass
+with FXAA, a screen-space anti-aliasing filter: an output pixel reads the
+rendered pixels up to ``n`` = 12 along an edge through it (VTK's endpoint
+search, ``EndpointSearchIterations``) and one across it, clamped at the
+image's border. A crop rendered to its own border would differ from the full
+frame wherever an edge crosses that border. The colour image is therefore
+rendered :data:`FXAA_REACH_PX` = ``n`` pixels beyond the window on every side
+where the full image extends (the crop intrinsics above of the grown window
+``x0 - l, y0 - t, w + l + r, h + t + b``, each margin ``min(n, pixels to the
+image's border)``) and cut back to the window; every pixel of the window
+then reads the same pixel positions as in the full frame. Depth and labels
+have no such pass and are rendered at the window. What remains is rounding:
+the two frusta's projection matrices differ, and the float transform of a
+vertex rounds differently in each, so a pixel whose centre lies within
+rounding of an edge may be covered in one and not the other, and where two
+faces coincide the depth test between them may go either way; FXAA then
+carries such a pixel along its edge.
 
 The window (:class:`CropWindow`) is sized once, at build time, from the
 object's swept volume: :func:`object_swept_points` places the corners of the
@@ -50,9 +68,10 @@ of the plant's scene.
 
 Ports the station exports from this camera (rendered on demand, like the
 full-frame ones): ``object_point_cloud`` (PointCloud, world frame, xyz + rgb,
-organised ``height' x width'``), ``object_color_image``,
-``object_depth_image`` (32F, m) and ``object_label_image`` (ground truth for
-tests; never rendered unless evaluated).
+organised ``height' x width'``; rgb from the colour image), ``object_color_image``
+(:class:`CroppedColorCamera`), ``object_depth_image`` (32F, m) and
+``object_label_image`` (ground truth for tests; never rendered unless
+evaluated), the last two from the ``RgbdSensor``.
 """
 
 from __future__ import annotations
@@ -69,6 +88,7 @@ from pydrake.geometry import (
     FramePoseVector,
     GeometryFrame,
     GeometryInstance,
+    QueryObject,
     RenderCameraCore,
     Role,
     SceneGraph,
@@ -78,13 +98,18 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.tree import BodyIndex
 from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.primitives import ConstantValueSource
-from pydrake.systems.sensors import CameraInfo, PixelType, RgbdSensor
+from pydrake.systems.sensors import CameraInfo, ImageRgba8U, PixelType, RgbdSensor
 
-__all__ = ["CropWindow", "ObjectCamera", "add_object_camera", "add_render_scene", "crop_camera_info",
-           "crop_window", "object_swept_points"]
+__all__ = ["CropWindow", "CroppedColorCamera", "ObjectCamera", "add_object_camera", "add_render_scene",
+           "color_padding", "crop_camera_info", "crop_window", "object_swept_points"]
 
 MARGIN_PX = 6
 """Pixels added on every side of the swept volume's projection."""
+
+FXAA_REACH_PX = 12
+"""Pixels the object camera's colour image is rendered beyond its window on every side
+(where the full image has them): the reach of RenderEngineVtk's FXAA pass along an edge
+(module docstring)."""
 
 
 @dc.dataclass(frozen=True)
@@ -120,6 +145,8 @@ class ObjectCamera:
     image_port_names: tuple[str, str] = ("object_color_image", "object_depth_image")
     cloud_port_name: str = "object_point_cloud"
     label_port_name: str = "object_label_image"
+    color_padding: tuple[int, int, int, int] = (0, 0, 0, 0)
+    """Pixels (left, top, right, bottom) the colour image is rendered beyond the window."""
 
 
 class _RenderPoses(LeafSystem):
@@ -261,6 +288,42 @@ def crop_window(points_W: np.ndarray, X_WC: RigidTransform, info: CameraInfo,
     return CropWindow(x0, y0, x1 - x0, y1 - y0)
 
 
+def color_padding(info: CameraInfo, window: CropWindow, reach_px: int = FXAA_REACH_PX) -> tuple[int, int, int, int]:
+    """Pixels (left, top, right, bottom) to render beyond ``window`` of the image ``info``:
+    ``reach_px`` on every side, clipped to the image."""
+    return (min(reach_px, window.x0), min(reach_px, window.y0),
+            min(reach_px, info.width() - window.x0 - window.width),
+            min(reach_px, info.height() - window.y0 - window.height))
+
+
+class CroppedColorCamera(LeafSystem):
+    """The colour image of the crop ``window`` of ``color_camera`` (its body at ``X_PB`` in
+    the frame ``parent_id``), rendered ``reach_px`` pixels beyond the window on every side
+    the full image extends to (:func:`color_padding`) and cut back to the window (see the
+    module docstring). Input ``query`` (QueryObject); output ``color_image``
+    (ImageRgba8U, ``window.width x window.height``), rendered when evaluated."""
+
+    def __init__(self, color_camera: ColorRenderCamera, window: CropWindow, parent_id, X_PB: RigidTransform,
+                 reach_px: int = FXAA_REACH_PX):
+        super().__init__()
+        full, core = color_camera.core().intrinsics(), color_camera.core()
+        crop_camera_info(full, window)          # checks that the window lies inside the image
+        self.padding = left, top, right, bottom = color_padding(full, window, reach_px)
+        padded = crop_camera_info(full, CropWindow(window.x0 - left, window.y0 - top, window.width + left + right,
+                                                   window.height + top + bottom))
+        self._camera = ColorRenderCamera(RenderCameraCore(core.renderer_name(), padded, core.clipping(),
+                                                          core.sensor_pose_in_camera_body()), show_window=False)
+        self._parent, self._X_PB = parent_id, X_PB
+        self._rows, self._cols = slice(top, top + window.height), slice(left, left + window.width)
+        self._query = self.DeclareAbstractInputPort("query", Value(QueryObject()))
+        self.DeclareAbstractOutputPort("color_image", lambda: Value(ImageRgba8U(window.width, window.height)),
+                                       self._calc, {self._query.ticket()})
+
+    def _calc(self, context, output):
+        image = self._query.Eval(context).RenderColorImage(self._camera, self._parent, self._X_PB)
+        output.get_mutable_value().mutable_data[:] = image.data[self._rows, self._cols]
+
+
 def add_object_camera(builder, station, color_camera: ColorRenderCamera, depth_camera: DepthRenderCamera,
                       parent_id, X_PC: RigidTransform, margin_px: int = MARGIN_PX) -> ObjectCamera:
     """Adds the object camera next to the full-frame camera described by ``color_camera`` /
@@ -287,19 +350,24 @@ def add_object_camera(builder, station, color_camera: ColorRenderCamera, depth_c
                                                depth_camera.core().clipping(),
                                                depth_camera.core().sensor_pose_in_camera_body()),
                               depth_camera.depth_range())
+    # Depth and labels: the sensor (its colour port stays unused).
     sensor = builder.AddNamedSystem("object_camera", RgbdSensor(parent_id, X_PC, color, depth))
     scene = getattr(station, "render_scene", None) or station.scene_graph
     builder.Connect(scene.get_query_output_port(), sensor.query_object_input_port())
+    # Colour: rendered beyond the window and cut back to it (module docstring).
+    color_image = builder.AddNamedSystem("object_color_camera",
+                                         CroppedColorCamera(color_camera, window, parent_id, X_PC))
+    builder.Connect(scene.get_query_output_port(), color_image.get_input_port())
     to_cloud = builder.AddNamedSystem("object_depth_to_cloud", DepthImageToPointCloud(
         info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
     builder.Connect(sensor.depth_image_32F_output_port(), to_cloud.depth_image_input_port())
-    builder.Connect(sensor.color_image_output_port(), to_cloud.color_image_input_port())
+    builder.Connect(color_image.get_output_port(), to_cloud.color_image_input_port())
     # A constant camera pose keeps the cloud's cache independent of the robot's state.
     pose = builder.AddNamedSystem("object_camera_pose", ConstantValueSource(AbstractValue.Make(X_WC)))
     builder.Connect(pose.get_output_port(), to_cloud.camera_pose_input_port())
-    camera = ObjectCamera(window, info, sensor)
+    camera = ObjectCamera(window, info, sensor, color_padding=color_image.padding)
     builder.ExportOutput(to_cloud.point_cloud_output_port(), camera.cloud_port_name)
-    builder.ExportOutput(sensor.color_image_output_port(), camera.image_port_names[0])
+    builder.ExportOutput(color_image.get_output_port(), camera.image_port_names[0])
     builder.ExportOutput(sensor.depth_image_32F_output_port(), camera.image_port_names[1])
     builder.ExportOutput(sensor.label_image_output_port(), camera.label_port_name)
     return camera
