@@ -54,8 +54,9 @@ def test_humanlike_plan_is_seeded_and_varies():
     target = a.positions[2]
     assert np.linalg.norm(overshoot - target) == pytest.approx(va["overshoot_m"], abs=1e-9)
     # No variation: the scripted keyframes exactly.
+    assert 0.2 <= va["follow_through"] <= 1.0
     quiet = DemonstratorConfig(time_scale_range=0, path_noise=0, grasp_offset=0, orientation_noise_deg=0,
-                               pause_probability=0, overshoot=0)
+                               pause_probability=0, overshoot=0, follow_through_range=[1.0, 1.0])
     plain, _ = humanlike_plan("open", X_WO, home, 3, quiet)
     ref = scripted_plan("open", X_WO, home)
     np.testing.assert_allclose(plain.positions, ref.positions, atol=1e-12)
@@ -69,6 +70,8 @@ def test_config_loads_from_yaml_and_rejects_bad_fields():
     assert DemonstratorConfig().count_for("close") == 2 and DemonstratorConfig().count_for("draw") == 2
     with pytest.raises(ValueError, match="'time_scale_range' = 1.5"):
         load_demonstrator_config(data="{time_scale_range: 1.5}")
+    with pytest.raises(ValueError, match="'follow_through_range' = \\[0.5, 1.5\\]"):
+        load_demonstrator_config(data="{follow_through_range: [0.5, 1.5]}")
     with pytest.raises(ValueError, match="path_nosie"):
         load_demonstrator_config(data="{path_nosie: 0.1}")
     with pytest.raises(ValueError, match="record_hz an integer multiple of action_hz"):
@@ -116,9 +119,11 @@ def test_same_seed_same_demonstration(draw_demonstrator):
     assert a.metadata == b.metadata
 
 
-def test_recorded_pose_is_the_measured_one(draw_demonstrator):
+def test_recorded_pose_is_the_measured_one(draw_demonstrator, monkeypatch):
     """In free space the hand follows the command within millimetres; in contact the record
     holds where the object stopped the hand, centimetres from the command that pushed it."""
+    # The scripted pull in full (16 cm; a shorter follow-through pulls less far against friction).
+    monkeypatch.setattr(draw_demonstrator.config, "follow_through_range", [1.0, 1.0])
     demo = draw_demonstrator.record(seed=2)
     sim = draw_demonstrator.sim
     plan = sim.source.plan(sim.source.GetMyContextFromRoot(sim.context))

@@ -72,3 +72,19 @@ def test_evaluate_the_learned_skill(learned, capsys):
     held = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()][-1]
     policy = report["policies"][str(report["initial_index"])]
     assert policy["successes"] == held["successes"] and policy["returns"] == held["returns"]
+
+
+def test_evaluate_explore_reports_the_spread_of_exploratory_returns(learned, capsys, tmp_path):
+    shared, _, _ = learned
+    capsys.readouterr()
+    out = tmp_path / "exploration.json"
+    assert main(["evaluate", "--skill", str(shared["skill_dir"]), "--station-config", str(shared["station_yaml"]),
+                 "--explore", "2", "--out", str(out), "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report == json.loads(out.read_text())
+    assert report["seeds"] == [900000, 900001] and len(report["returns"]) == 2
+    spread = report["return_spread"]
+    assert spread["min"] == min(report["returns"]) and spread["max"] == max(report["returns"])
+    assert spread["min"] <= spread["median"] <= spread["max"] and spread["std"] >= 0.0
+    assert all(r >= 0.0 for r in report["returns"])
+    assert main(["evaluate", "--skill", str(shared["skill_dir"]), "--explore", "-1"]) == 2

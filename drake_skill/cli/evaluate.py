@@ -1,7 +1,7 @@
 """``drake-skill evaluate``: greedy success of a skill over held-out object poses.
 
     drake-skill evaluate --skill DIR [--poses 10] [--seed0 900000] [--workers 1]
-                         [--ground-truth-pose] [--all-demos] [--out FILE] [--json]
+                         [--ground-truth-pose] [--all-demos | --explore N] [--out FILE] [--json]
 
 Executes the skill's policy without exploration (a fitted skill's initial
 DMP, i.e. plain imitation; a skill written by ``drake-skill learn``, the
@@ -16,6 +16,13 @@ Prints a table (success rate, the goal model's verdicts, mean learned
 return, final lid angle / drawer travel, failures) and writes the report as
 JSON to ``--out`` (default ``DIR/evaluation.json``); ``--json`` prints that
 JSON object instead of the table.
+
+With ``--explore N`` it runs instead the N exploratory rollouts policy
+search's first episode would run (weights sampled from N(W_0, Sigma_b^0),
+seeded by --seed0, one pose each) and reports the spread of their learned
+returns, their successes and final object states (default out
+``DIR/exploration.json``): whether the learned reward gives policy search
+something to climb.
 """
 
 from __future__ import annotations
@@ -42,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ground-truth-pose", action="store_true",
                         help="object frame from the simulator's ground truth instead of the segmenter")
     parser.add_argument("--all-demos", action="store_true", help="evaluate every demonstration's DMP")
+    parser.add_argument("--explore", type=int, default=0, metavar="N",
+                        help="instead: N exploratory rollouts sampled from the skill's Sigma_0 (policy "
+                             "search's first episode); reports the spread of their learned returns")
     parser.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE", help="scenario YAML (StationConfig; default: the skill's scenario)")
     parser.add_argument("--out", type=Path, default=None, help="JSON report (default SKILL/evaluation.json)")
     parser.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
@@ -62,14 +72,28 @@ def run(args: argparse.Namespace) -> int:
     if not args.skill.is_dir():
         raise NotADirectoryError(f"--skill {args.skill}: not a folder; give a skill folder "
                                  "(drake-skill fit --out / drake-skill learn --out .../skill)")
+    if args.explore < 0:
+        raise ValueError(f"--explore must be a number of rollouts >= 1, got {args.explore}")
     name = Skill.load(args.skill).name
     station = scenario_for_skill(name)
     if args.station_config is not None:
         station = load_station_config(args.station_config, defaults=station)
+    rollout_config = RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived")
+    if args.explore:
+        from drake_skill.learning.loop import exploration_table, explore_skill
+
+        report = explore_skill(args.skill, rollouts=args.explore, seed0=args.seed0, station_config=station,
+                               rollout_config=rollout_config, workers=args.workers,
+                               ray_address=args.ray_address, progress=not (args.quiet or args.json))
+        out = args.out if args.out is not None else args.skill / "exploration.json"
+        atomic_write_json(out, report)
+        print(json.dumps(report, sort_keys=True) if args.json else exploration_table(report))
+        if not args.json:
+            print(f"wrote {out}")
+        return 0
     report = evaluate_skill(
         args.skill, poses=args.poses, seed0=args.seed0, station_config=station,
-        rollout_config=RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived"),
-        workers=args.workers, ray_address=args.ray_address, all_demos=args.all_demos,
+        rollout_config=rollout_config, workers=args.workers, ray_address=args.ray_address, all_demos=args.all_demos,
         progress=not (args.quiet or args.json))
     out = args.out if args.out is not None else args.skill / "evaluation.json"
     atomic_write_json(out, report)

@@ -543,6 +543,64 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
     return report
 
 
+def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0, station_config=None,
+                  rollout_config=None, workers: int = 1, ray_address: str | None = None,
+                  progress: bool = True) -> dict[str, Any]:
+    """Exploratory rollouts of a fitted skill: what the first episode of policy search sees.
+
+    Draws ``rollouts`` weight samples ``W ~ N(W_0, Sigma_b^0)`` per basis
+    (PI^2-ES-Cov's first ``ask``, seeded by ``seed0``) and executes each on
+    the pose of seed ``seed0 + i``. Returns a JSON-able report: the returns
+    (learned dense reward; 0 for a failed rollout), their spread (min,
+    median, max, standard deviation), ground-truth successes, final object
+    states and failures by reason.
+    """
+    from drake_skill.learning.rollout import RolloutConfig
+    from drake_skill.learning.workers import RunnerSpec, make_pool
+    from drake_skill.skill import Skill
+    from drake_skill.station.config import scenario_for_skill
+
+    if int(rollouts) < 1:
+        raise ValueError(f"rollouts: expected at least 1 exploratory rollout, got {rollouts}")
+    skill = Skill.load(skill_dir)
+    station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
+    rollout_config = (rollout_config or RolloutConfig()).validate()
+    samples = make_policy_search("pi2-es-cov", skill.initial_weights, skill.sigma0, seed=int(seed0)).ask(int(rollouts))
+    seeds = [int(seed0) + i for i in range(int(rollouts))]
+    start = time.perf_counter()
+    spec = RunnerSpec.create(skill_dir, station_config, rollout_config)
+    from tqdm import tqdm
+    bar = tqdm(total=len(seeds), desc="exploration", unit="rollout", disable=not progress, leave=False,
+               file=sys.stderr)
+    try:
+        with make_pool(spec, workers, ray_address) as pool:
+            results = pool.map([(w, s) for w, s in zip(samples, seeds)], lambda i, r: bar.update(1))
+    finally:
+        bar.close()
+    returns = np.array([r.dense_return for r in results], dtype=float)
+    finals = [None if not math.isfinite(r.final_object_state) else float(r.final_object_state) for r in results]
+    return {"skill": skill.name, "skill_dir": str(Path(skill_dir)), "seeds": seeds,
+            "object_pose": rollout_config.object_pose, "returns": returns.tolist(),
+            "return_spread": {"min": float(returns.min()), "median": float(np.median(returns)),
+                              "max": float(returns.max()), "std": float(returns.std())},
+            "successes": [bool(r.success) for r in results], "success_rate": float(np.mean([r.success for r in results])),
+            "final_object_state": finals, "failures": dict(Counter(r.reason for r in results if r.failed)),
+            "wall_s": round(time.perf_counter() - start, 1)}
+
+
+def exploration_table(report: dict[str, Any]) -> str:
+    """The people's view of :func:`explore_skill`'s report."""
+    s = report["return_spread"]
+    finals = [v for v in report["final_object_state"] if v is not None]
+    failures = ", ".join(f"{k} {v}" for k, v in sorted(report["failures"].items())) or "-"
+    state = f"{np.median(finals):.2f} ({min(finals):.2f}..{max(finals):.2f})" if finals else "-"
+    return "\n".join([
+        f"{report['skill']}: {len(report['seeds'])} exploratory rollouts from Sigma_0 (seeds {report['seeds'][0]}.."
+        f"{report['seeds'][-1]}), {report['wall_s']} s",
+        f"  return: min {s['min']:.1f}, median {s['median']:.1f}, max {s['max']:.1f}, std {s['std']:.1f}",
+        f"  success {report['success_rate'] * 100:.0f}%, final state {state}, failures {failures}"])
+
+
 def evaluation_table(report: dict[str, Any]) -> str:
     """The people's view of :func:`evaluate_skill`'s report."""
     lines = [f"{'policy':<22}{'success':>9}{'verdict':>9}{'mean R':>9}{'final state':>20}  failures"]
