@@ -7,7 +7,8 @@
    seed) and the per-basis exploration covariances Sigma_b^0 their sample
    covariance plus a ridge (``drake_skill.action.dmp.fit_demonstrations``);
 2. perception: every demonstration frame's segmented object cloud (2048
-   points) is encoded by the PCAE into a 128-D code (frames where the object
+   points), expressed in the demonstration's perceived object frame
+   (``SkillConfig.cloud_frame``), is encoded by the PCAE into a 128-D code (frames where the object
    was not seen hold the last seen code, as ``PcaeFeaturizer`` does online);
    a PCA fitted on all demonstration codes maps them to 8-D goal data;
 3. goal model: a Gaussian HMM over the goal data (states chosen by AIC),
@@ -41,7 +42,7 @@ from drake_skill.perception.features import GoalFeatures, GoalFeaturesConfig
 from drake_skill.reward.pomrp import Pomrp, PomrpConfig, fit_pomrp
 from drake_skill.common import SKILLS
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 
 # Thesis Table 6.1 (simulation: Open 20, Close 10; real robot: Draw 9).
 DEFAULT_BASES = {"open": 20, "close": 10, "draw": 9}
@@ -58,6 +59,11 @@ class SkillConfig:
     goal_features: PCA size (8).
     pomrp: goal HMM, MRP and verdict settings.
     pcae_weights: the PCAE safetensors file ("" = the shipped models/pcae.safetensors).
+    cloud_frame: the frame the object clouds are encoded in: "object" (default,
+      docs/method.md section 3: the perceived object frame X_WO of the
+      execution's first valid camera frame, which removes the object's yaw
+      and position on the table) or "world" (the thesis's; skills saved
+      before schema version 3).
     """
 
     skill: str = "open"
@@ -67,6 +73,10 @@ class SkillConfig:
     goal_features: GoalFeaturesConfig = dc.field(default_factory=GoalFeaturesConfig)
     pomrp: PomrpConfig = dc.field(default_factory=PomrpConfig)
     pcae_weights: str = ""
+    cloud_frame: str = "object"
+
+
+CLOUD_FRAMES = ("object", "world")
 
 
 def default_skill_config(skill: str) -> SkillConfig:
@@ -100,11 +110,18 @@ def hold_invalid(codes: np.ndarray, valid: np.ndarray, name: str = "frames") -> 
     return out
 
 
-def encode_sequence(encoder, object_points, valid=None, name: str = "object_points") -> np.ndarray:
-    """PCAE codes (T, 128) of (T, N, 3) clouds; frames not valid hold the last valid code."""
+def encode_sequence(encoder, object_points, valid=None, name: str = "object_points", X_WO=None) -> np.ndarray:
+    """PCAE codes (T, 128) of (T, N, 3) world-frame clouds; frames not valid hold the last valid code.
+
+    With ``X_WO`` ((7,) xyz + wxyz or (4, 4)) the clouds are expressed in that
+    frame first (``drake_skill.perception.pcae.cloud_in_object_frame``).
+    """
     points = np.asarray(object_points, dtype=np.float32)
     if points.ndim != 3 or points.shape[2] != 3:
         raise ValueError(f"{name}: expected shape (T, N, 3), got {points.shape}")
+    if X_WO is not None:
+        from drake_skill.perception.pcae import cloud_in_object_frame
+        points = cloud_in_object_frame(points, X_WO)
     valid = np.ones(len(points), bool) if valid is None else np.asarray(valid, bool)
     if valid.shape != (len(points),):
         raise ValueError(f"{name}: validity flags of shape {valid.shape} do not match {len(points)} frames")
@@ -153,13 +170,27 @@ class Skill:
             self._encoder = load_pcae(self.pcae_weights)
         return self._encoder
 
-    def codes(self, object_points, valid=None, name: str = "object_points") -> np.ndarray:
-        """PCAE codes (T, 128) of (T, 2048, 3) clouds; invalid frames hold the last valid code."""
-        return encode_sequence(self.encoder(), object_points, valid, name)
+    def codes(self, object_points, valid=None, name: str = "object_points", X_WO=None) -> np.ndarray:
+        """PCAE codes (T, 128) of (T, 2048, 3) world-frame clouds; invalid frames hold the last valid code.
 
-    def goal_data(self, object_points, valid=None) -> np.ndarray:
-        """Goal data G (T, 8) of an execution's object clouds (T, 2048, 3)."""
-        return self.goal_features.transform(self.codes(object_points, valid))
+        X_WO: the execution's perceived object pose ((7,) xyz + wxyz, e.g.
+        ``Demonstration.X_WO_start`` or ``RolloutResult.object_pose``, or a
+        RigidTransform); required when ``config.cloud_frame`` is "object".
+        """
+        if self.config.cloud_frame == "object":
+            if X_WO is None:
+                raise ValueError(f"skill '{self.name}' encodes clouds in the object frame: pass X_WO, the "
+                                 "execution's perceived object pose (Demonstration.X_WO_start, "
+                                 "RolloutResult.object_pose)")
+            if hasattr(X_WO, "GetAsMatrix4"):
+                X_WO = X_WO.GetAsMatrix4()
+        else:
+            X_WO = None
+        return encode_sequence(self.encoder(), object_points, valid, name, X_WO=X_WO)
+
+    def goal_data(self, object_points, valid=None, X_WO=None) -> np.ndarray:
+        """Goal data G (T, 8) of an execution's object clouds (T, 2048, 3) (X_WO: see :meth:`codes`)."""
+        return self.goal_features.transform(self.codes(object_points, valid, X_WO=X_WO))
 
     # ------------------------------------------------------------ rewards
     def dense_return(self, G) -> float:
@@ -286,7 +317,7 @@ class Skill:
 
 
 _SKILL_FILES = ("pcae.safetensors", "arrays.npz", "skill.yaml")
-_READABLE_VERSIONS = (1, 2)
+_READABLE_VERSIONS = (1, 2, 3)
 
 
 def _check_checksums(directory: Path, meta: dict, version: int) -> None:
@@ -314,12 +345,18 @@ def _load_config(path: Path, version: int) -> SkillConfig:
     if version == 1:
         # Every version-1 skill was fitted with the thesis's amplitude scaling.
         defaults.dmp.scale_by_amplitude = True
+    if version <= 2:
+        # Skills before version 3 encoded world-frame clouds.
+        defaults.cloud_frame = "world"
     try:
         config = yaml_load_typed(schema=SkillConfig, filename=str(path), defaults=defaults)
     except RuntimeError as e:
         raise ValueError(f"{path}: {e}") from e
     if config.skill not in SKILLS:
         raise ValueError(f"{path}: field 'skill' is {config.skill!r}; expected one of {', '.join(SKILLS)}")
+    if config.cloud_frame not in CLOUD_FRAMES:
+        raise ValueError(f"{path}: field 'cloud_frame' is {config.cloud_frame!r}; expected one of "
+                         f"{', '.join(CLOUD_FRAMES)}")
     try:
         config.dmp.validate()
     except ValueError as e:
@@ -399,10 +436,15 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
     config = config if config is not None else default_skill_config("open")
     if len(demos) < 2:
         raise ValueError(f"demos: need at least 2 demonstrations of '{config.skill}', got {len(demos)}")
+    if config.cloud_frame not in CLOUD_FRAMES:
+        raise ValueError(f"config.cloud_frame: {config.cloud_frame!r}; expected one of {', '.join(CLOUD_FRAMES)}")
     for i, demo in enumerate(demos):
         if getattr(demo, "object_points", None) is None:
             raise ValueError(f"demos[{i}]: recorded without perception (no object_points); "
                              "record demonstrations with the camera on")
+        if config.cloud_frame == "object" and getattr(demo, "X_WO_start", None) is None:
+            raise ValueError(f"demos[{i}]: no perceived object pose (X_WO_start) to express its clouds in "
+                             "(cloud_frame: object); record it with the camera on, or fit with cloud_frame: world")
         skill = getattr(demo, "skill", config.skill)
         name = getattr(demo, "path", None) or f"demos[{i}]"
         if skill != config.skill:
@@ -425,7 +467,8 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
     weights = _pcae_path(config)
     encoder = load_pcae(weights)
     pca = GoalFeatures.from_config(config.goal_features)
-    codes = [encode_sequence(encoder, d.object_points, d.perception_valid, f"demos[{i}].perception_valid")
+    codes = [encode_sequence(encoder, d.object_points, d.perception_valid, f"demos[{i}].perception_valid",
+                             X_WO=d.X_WO_start if config.cloud_frame == "object" else None)
              for i, d in enumerate(demos)]
     lengths = np.array([len(c) for c in codes])
     pca.fit(np.concatenate(codes), lengths)

@@ -10,7 +10,7 @@ import pytest
 from scipy.special import logsumexp
 
 from drake_skill.action.dmp import DmpConfig, fit_demonstrations
-from drake_skill.fileio import atomic_save_npz, load_npz
+from drake_skill.fileio import atomic_save_npz, file_sha256, load_npz
 from drake_skill.perception.features import GoalFeatures
 from drake_skill.perception.pcae import DEFAULT_WEIGHTS
 from drake_skill.reward.goal_model import GoalHMM, GoalModelConfig, _backward_log, forward_backward, forward_log
@@ -174,9 +174,32 @@ def test_version_1_skill_still_loads(saved_skill, tmp_path):
     import yaml
     config = yaml.safe_load((directory / "skill.yaml").read_text())
     del config["dmp"]["scale_by_amplitude"], config["pomrp"]["off_model"]  # fields added with schema 2
+    del config["cloud_frame"]                                                 # added with schema 3
     (directory / "skill.yaml").write_text(yaml.safe_dump(config))
     (directory / "skill.json").write_text(json.dumps(meta))
     skill = Skill.load(directory)
     assert skill.config.dmp.scale_by_amplitude  # the thesis form every version-1 skill was fitted with
+    assert skill.config.cloud_frame == "world"  # and world-frame clouds
     assert not skill.pomrp.off_model_config.enabled and not skill.config.pomrp.off_model.enabled
     assert np.isfinite(skill.dense_return(skill.pomrp.goal_model.sample(20, 0)[0]))
+
+
+def test_version_2_skill_encodes_world_frame_clouds(saved_skill, tmp_path):
+    """A skill saved before schema 3 has no cloud_frame: its goal data came from world-frame clouds."""
+    import yaml
+
+    directory = _copy(saved_skill, tmp_path)
+    meta = json.loads((directory / "skill.json").read_text())
+    config = yaml.safe_load((directory / "skill.yaml").read_text())
+    del config["cloud_frame"]
+    (directory / "skill.yaml").write_text(yaml.safe_dump(config))
+    meta["schema_version"] = 2
+    meta["sha256"]["skill.yaml"] = file_sha256(directory / "skill.yaml")
+    (directory / "skill.json").write_text(json.dumps(meta))
+    skill = Skill.load(directory)
+    assert skill.config.cloud_frame == "world"
+    assert Skill.load(saved_skill).config.cloud_frame == "object"
+    points = np.random.default_rng(0).uniform(0.3, 0.6, (3, 2048, 3))
+    skill.goal_data(points)                           # world frame: no pose needed
+    with pytest.raises(ValueError, match="pass X_WO"):
+        Skill.load(saved_skill).goal_data(points)

@@ -9,6 +9,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_skill.demos.demonstrator import DemonstratorConfig, ScriptedDemonstrator
 from drake_skill.perception import systems
+from drake_skill.perception.pcae import cloud_in_object_frame
 from drake_skill.perception.segmentation import fit_table_plane, process_frame
 from drake_skill.reward.systems import add_goal_pipeline
 from drake_skill.skill import default_skill_config, fit_skill
@@ -54,7 +55,7 @@ def test_demonstration_returns_and_verdicts_unchanged(demos, skill):
     for i, (a, b) in enumerate(zip(crop, full)):
         assert a.object_points.shape == b.object_points.shape
         np.testing.assert_array_equal(a.perception_valid, b.perception_valid)
-        G = skill.goal_data(a.object_points, a.perception_valid)
+        G = skill.goal_data(a.object_points, a.perception_valid, X_WO=a.X_WO_start)
         R, R_full = skill.dense_return(G), skill.info["demo_returns"][i]
         assert abs(R - R_full) <= 0.01 * abs(R_full), f"demo {i}: return {R:.3f} vs full frame {R_full:.3f}"
         assert skill.verdict(G) == skill.info["demo_verdicts"][i]
@@ -104,11 +105,17 @@ def test_rollout_return_equals_offline_return_of_its_clouds(skill, monkeypatch):
     shape = station.object_camera.window.shape
     plane = fit_table_plane(full_xyz, config.segmentation, (480, 640), seed=config.seed)
     np.testing.assert_array_equal(plane, pipeline.segmenter.table_plane(pipeline.segmenter.GetMyContextFromRoot(context)))
-    encoder, goal = skill.encoder(), []
+    encoder, goal, X_WO_first = skill.encoder(), [], None
     for xyz, rgb in clouds[:-1]:
         result = process_frame(xyz, rgb, plane, config.segmentation, shape, n_points=config.n_points, seed=config.seed)
         if result.valid:
-            goal.append(skill.goal_features.transform(encoder.encode_points(result.points)))
+            if X_WO_first is None:      # the object frame of the run's first valid frame
+                c, s_ = np.cos(result.box.yaw), np.sin(result.box.yaw)
+                X_WO_first = np.eye(4)
+                X_WO_first[:3, :3] = [[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]]
+                X_WO_first[:3, 3] = result.box.position
+            points = cloud_in_object_frame(result.points, X_WO_first)
+            goal.append(skill.goal_features.transform(encoder.encode_points(points)))
     G = np.array(goal)
     reward_context = pipeline.reward.GetMyContextFromRoot(context)
     G_online = pipeline.reward.goal_sequence(reward_context)

@@ -168,3 +168,42 @@ def test_shipped_weights_load():
     code = state.get_vector(0).get_value()
     assert code.shape == (128,) and np.all(np.isfinite(code)) and np.any(code > 0)
     np.testing.assert_allclose(code, pcae.load_pcae().encode_points(_cloud(5)), atol=1e-6)
+
+
+def test_cloud_in_object_frame_matches_drake_transform():
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    X_WO = RigidTransform(RotationMatrix.MakeZRotation(0.07), [0.45, -0.02, 0.001])
+    pts = _cloud(7) + [0.3, -0.1, 0.0]
+    expected = (X_WO.inverse() @ pts.T).T
+    vec = np.concatenate([X_WO.translation(), X_WO.rotation().ToQuaternion().wxyz()])
+    np.testing.assert_allclose(pcae.cloud_in_object_frame(pts, vec), expected, atol=1e-6)
+    np.testing.assert_allclose(pcae.cloud_in_object_frame(pts[None], X_WO.GetAsMatrix4())[0], expected, atol=1e-6)
+    with pytest.raises(ValueError, match="X_WO"):
+        pcae.cloud_in_object_frame(pts, np.zeros(6))
+
+
+def test_object_frame_latched_at_the_first_valid_frame(model, pca):
+    """With X_WO connected the clouds are encoded in the object frame of the run's first valid frame."""
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    a, b = _cloud(11) + [0.4, 0.0, 0.0], _cloud(12) + [0.4, 0.0, 0.0]
+    X1 = RigidTransform(RotationMatrix.MakeZRotation(0.08), [0.45, 0.01, 0.0])
+    builder = DiagramBuilder()
+    src = builder.AddSystem(FrameSource([a, a, b], [0, 1, 1]))
+    feat = builder.AddSystem(PcaeFeaturizer(pca, model=model))
+    builder.Connect(src.GetOutputPort("object_points"), feat.get_object_points_input_port())
+    builder.Connect(src.GetOutputPort("valid"), feat.get_valid_input_port())
+    builder.ExportInput(feat.get_X_WO_input_port(), "X_WO")
+    diagram = builder.Build()
+    sim = Simulator(diagram)
+    ctx = sim.get_mutable_context()
+    diagram.get_input_port(0).FixValue(ctx, X1)
+    sim.AdvanceTo(0.15)      # frame 1: the first valid one latches X1
+    np.testing.assert_allclose(_read(feat, ctx)[0], model.encode_points(pcae.cloud_in_object_frame(a, X1.GetAsMatrix4())), atol=1e-6)
+    # Moving the perceived pose afterwards does not move the frame of this run.
+    diagram.get_input_port(0).FixValue(ctx, RigidTransform([0.1, 0.0, 0.0]))
+    sim.AdvanceTo(0.25)
+    code_b = _read(feat, ctx)[0]
+    np.testing.assert_allclose(code_b, model.encode_points(pcae.cloud_in_object_frame(b, X1.GetAsMatrix4())), atol=1e-6)
+    assert np.linalg.norm(code_b - model.encode_points(b)) > 1e-4

@@ -9,7 +9,7 @@ from drake_skill.skill import Skill, default_skill_config, fit_skill, hold_inval
 
 
 def _parked_goal_clouds(demonstrator, seed, duration=6.0):
-    """Object clouds (T, 2048, 3) and flags while the arm stays at home."""
+    """Object clouds (T, 2048, 3), flags and the perceived X_WO (7,) while the arm stays at home."""
     sim = demonstrator.sim
     sim.reset(seed)
     sim.set_plan(hold_plan(sim.home_pose()))
@@ -17,7 +17,7 @@ def _parked_goal_clouds(demonstrator, seed, duration=6.0):
     recorder.anchor()
     for _ in range(int(duration * 10) + 1):
         recorder.sample(0.0)
-    return np.stack(recorder.points), np.array(recorder.valid)
+    return np.stack(recorder.points), np.array(recorder.valid), recorder.X_WO_perceived
 
 
 @pytest.fixture(scope="module")
@@ -62,9 +62,9 @@ _HELD_OUT_VERDICT_REGRESSION = pytest.mark.xfail(
 
 @_HELD_OUT_VERDICT_REGRESSION
 def test_goal_model_judges_held_out_demo_and_parked_arm(close_skill, close_data):
-    _, held_out, (parked_points, parked_valid) = close_data
-    G_demo = close_skill.goal_data(held_out.object_points, held_out.perception_valid)
-    G_parked = close_skill.goal_data(parked_points, parked_valid)
+    _, held_out, (parked_points, parked_valid, parked_X_WO) = close_data
+    G_demo = close_skill.goal_data(held_out.object_points, held_out.perception_valid, X_WO=held_out.X_WO_start)
+    G_parked = close_skill.goal_data(parked_points, parked_valid, X_WO=parked_X_WO)
     assert close_skill.verdict(G_demo), "held-out demonstration judged a failure"
     assert not close_skill.verdict(G_parked), "parked arm judged a success"
     # Dense returns order them the same way (per frame, as lengths differ).
@@ -78,8 +78,8 @@ def test_skill_round_trips_with_identical_rewards(close_skill, close_data, tmp_p
     for a, b in zip(close_skill.dmps, loaded.dmps):
         np.testing.assert_array_equal(a.weights, b.weights)
     np.testing.assert_array_equal(close_skill.sigma0, loaded.sigma0)
-    G1 = close_skill.goal_data(held_out.object_points, held_out.perception_valid)
-    G2 = loaded.goal_data(held_out.object_points, held_out.perception_valid)
+    G1 = close_skill.goal_data(held_out.object_points, held_out.perception_valid, X_WO=held_out.X_WO_start)
+    G2 = loaded.goal_data(held_out.object_points, held_out.perception_valid, X_WO=held_out.X_WO_start)
     np.testing.assert_array_equal(G1, G2)
     assert close_skill.dense_return(G1) == loaded.dense_return(G2)
     np.testing.assert_array_equal(close_skill.pomrp.rewards(G1), loaded.pomrp.rewards(G2))

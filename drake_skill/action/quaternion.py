@@ -66,6 +66,14 @@ def quat_normalize(q: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
+def quat_to_rotation_matrix(q) -> np.ndarray:
+    """Rotation matrix R (3, 3) of a unit quaternion ``(w, x, y, z)`` (normalised first)."""
+    w, x, y, z = quat_normalize(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
 def quat_conjugate(q: np.ndarray) -> np.ndarray:
     """Returns the conjugate ``(w, -x, -y, -z)``; the inverse for unit ``q``."""
     q = np.asarray(q, dtype=float)

@@ -31,7 +31,7 @@ def _state_clouds(skill, demos):
     """For each HMM state, the demonstration cloud whose frame is most likely in it."""
     best = {}
     for demo in demos:
-        G = skill.goal_data(demo.object_points, demo.perception_valid)
+        G = skill.goal_data(demo.object_points, demo.perception_valid, X_WO=demo.X_WO_start)
         _, post, _ = skill.pomrp.posteriors(G)   # smoothed (T, k)
         for s in range(post.shape[1]):
             t = int(np.argmax(post[:, s]))
@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     print(skill.summary())
     plot_goal_model(skill.pomrp, args.out / "goal_model.png", clouds=_state_clouds(skill, demos),
                     title=f"goal model of '{config.skill}'")
-    rewards = {f"demo {i}": skill.pomrp.rewards(skill.goal_data(d.object_points, d.perception_valid))
+    rewards = {f"demo {i}": skill.pomrp.rewards(skill.goal_data(d.object_points, d.perception_valid, X_WO=d.X_WO_start))
                for i, d in enumerate(demos)}
     plot_return(rewards, args.out / "demo_returns.png")
     print(f"wrote {args.out}/ (skill.yaml, skill.json, arrays.npz, pcae.safetensors, "

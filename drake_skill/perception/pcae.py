@@ -17,13 +17,15 @@ In eval mode :meth:`PointCloudAutoencoder.encode_fast` folds every BatchNorm
 into the preceding Linear layer (same numbers up to float rounding).
 
 Input normalisation (:func:`normalize_points`): each cloud, given in metres in
-a gravity-aligned frame (world frame, z up), is centred on the centre of its
+a gravity-aligned frame (z up: the world frame, or the perceived object frame,
+:func:`cloud_in_object_frame`), is centred on the centre of its
 axis-aligned bounding box and divided by the FIXED length
 ``NORMALIZATION_SCALE_M`` = 0.25 m. No per-cloud scaling is done, so the
 object's size and the extent changes that encode its state (a lid opening, a
 drawer sliding out) stay in the input; centring on the box centre removes the
-object's position on the table. Yaw is not normalised; the encoder is trained
-on views from all azimuths.
+object's position on the table. The encoder is trained on views from all
+azimuths; a skill expresses its clouds in the perceived object frame
+(``SkillConfig.cloud_frame``), which removes the object's yaw on the table.
 
 Losses, in the units of their inputs:
 
@@ -97,6 +99,28 @@ def check_points(points, name: str = "points", n_points: int | None = N_POINTS) 
         raise ValueError(f"{name}: coordinate of magnitude {big:.3g} m; expected points within "
                          f"{MAX_COORDINATE_M:g} m of the world origin (a cloud in metres)")
     return out
+
+
+def cloud_in_object_frame(points, X_WO) -> np.ndarray:
+    """World-frame points expressed in the object frame O: ``p_O = R_WO^T (p_W - p_WO)``.
+
+    points: (N, 3) or (T, N, 3) in metres; X_WO: the object pose as a (7,)
+    vector (xyz m + unit quaternion wxyz) or a (4, 4) homogeneous matrix.
+    Returns float32 of the same shape. The perceived O is gravity-aligned
+    (a yaw about z), so the result stays z-up, as the encoder was trained.
+    """
+    X = np.asarray(X_WO, dtype=float)
+    if X.shape == (7,):
+        from drake_skill.action.quaternion import quat_to_rotation_matrix
+        R, p = quat_to_rotation_matrix(X[3:]), X[:3]
+    elif X.shape == (4, 4):
+        R, p = X[:3, :3], X[:3, 3]
+    else:
+        raise ValueError(f"X_WO: expected a (7,) pose (xyz + wxyz) or a (4, 4) matrix, got shape {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise ValueError("X_WO: contains NaN or inf")
+    pts = np.asarray(points, dtype=np.float64)
+    return ((pts - p) @ R).astype(np.float32)
 
 
 def normalize_points(points, scale_m: float = NORMALIZATION_SCALE_M):

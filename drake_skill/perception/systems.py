@@ -85,15 +85,19 @@ section 3, thesis 3.5) and :mod:`drake_skill.perception.features` (the per-skill
 PCA, thesis 6.4). Every ``period_s`` seconds (10 Hz by default, thesis 6.4)
 a periodic discrete update reads one frame:
 
-- if ``valid`` > 0.5 and ``object_points`` is connected, the cloud is encoded
-  (eval mode, ``torch.inference_mode``, ``n_threads`` torch threads) and the
+- if ``valid`` > 0.5 and ``object_points`` is connected, the cloud is
+  expressed in the object frame when ``X_WO`` is connected (``p_O = R_WO^T
+  (p_W - p_WO)``, :func:`~drake_skill.perception.pcae.cloud_in_object_frame`,
+  with the X_WO latched at the run's first valid frame, as the DMP's frame
+  is), then encoded (eval mode, ``torch.inference_mode``, ``n_threads`` torch threads) and the
   code, its goal data ``g = PCA(code)`` and ``goal_valid = 1`` are stored;
 - otherwise the last valid code and goal data are held and ``goal_valid = 0``
   marks the frame (before the first valid frame both are zeros).
 
 Per-run data live in the context's discrete state (``code`` (128),
 ``goal_data`` (k), ``flags`` (2: goal_valid of the latest frame, 1 once any
-frame was valid)); resetting the context to its defaults starts over. The
+frame was valid), ``X_WO`` (12: R_WO row-major then p_WO [m], latched at the
+first valid frame)); resetting the context to its defaults starts over. The
 weights and the PCA are construction-time constants.
 
 Ports:
@@ -103,6 +107,10 @@ Ports:
   2048 points). An upstream output must be declared with the same value type,
   e.g. ``DeclareAbstractOutputPort("object_points", lambda: AbstractValue.Make(np.zeros((2048, 3))), calc)``;
 - input ``valid`` (vector 1; optional, every frame valid when unconnected);
+- input ``X_WO`` (abstract RigidTransform; optional: the perceived object
+  pose, e.g. ``ObjectSegmenter``'s; unconnected, the clouds are encoded in
+  the world frame, the thesis's form and that of skills with
+  ``cloud_frame: world``);
 - output ``code`` (vector 128): latest valid PCAE code (dimensionless);
 - output ``goal_data`` (vector k = 8): PCA of that code (dimensionless; zeros
   if no PCA was given, as when recording demonstrations before fitting it);
@@ -128,7 +136,8 @@ from pydrake.perception import PointCloud
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
 from drake_skill.perception.features import GoalFeatures
-from drake_skill.perception.pcae import CODE_SIZE, DEFAULT_WEIGHTS, N_POINTS, PointCloudAutoencoder, check_points, load_pcae
+from drake_skill.perception.pcae import (CODE_SIZE, DEFAULT_WEIGHTS, N_POINTS, PointCloudAutoencoder, check_points,
+                                         cloud_in_object_frame, load_pcae)
 from drake_skill.perception.segmentation import (
     BOUNDING_BOX_SIZE,
     N_POINTS,
@@ -466,8 +475,10 @@ class PcaeFeaturizer(LeafSystem):
 
         self._points_port = self.DeclareAbstractInputPort("object_points", AbstractValue.Make(np.zeros((N_POINTS, 3))))
         self._valid_port = self.DeclareVectorInputPort("valid", 1)
+        self._X_WO_port = self.DeclareAbstractInputPort("X_WO", Value(RigidTransform()))
 
         self._code_index = self.DeclareDiscreteState(CODE_SIZE)
+        self._X_WO_index = self.DeclareDiscreteState(np.concatenate([np.eye(3).ravel(), np.zeros(3)]))
         self._goal_index = self.DeclareDiscreteState(n_goal)
         self._flags_index = self.DeclareDiscreteState(2)
         self.DeclarePeriodicDiscreteUpdateEvent(config.period_s, config.offset_s, self._update_frame)
@@ -483,6 +494,9 @@ class PcaeFeaturizer(LeafSystem):
 
     def get_valid_input_port(self):
         return self._valid_port
+
+    def get_X_WO_input_port(self):
+        return self._X_WO_port
 
     def get_code_output_port(self):
         return self._code_port
@@ -521,6 +535,15 @@ class PcaeFeaturizer(LeafSystem):
             pts = check_points(points, "object_points", N_POINTS)
         except ValueError as e:
             raise ValueError(f"PcaeFeaturizer at t = {context.get_time():.3f} s: {e} (world-frame cloud in metres)") from e
+        if self._X_WO_port.HasValue(context):
+            X_state = discrete_state.get_mutable_vector(self._X_WO_index)
+            if context.get_discrete_state(self._flags_index).get_value()[1] < 0.5:   # the run's first valid frame
+                X = self._X_WO_port.Eval(context)
+                X_state.SetFromVector(np.concatenate([X.rotation().matrix().ravel(), X.translation()]))
+            x = X_state.get_value()
+            X_WO = np.eye(4)
+            X_WO[:3, :3], X_WO[:3, 3] = x[:9].reshape(3, 3), x[9:]
+            pts = cloud_in_object_frame(pts, X_WO)
         code = self._model.encode_points(pts, n_threads=self._config.n_threads)
         discrete_state.get_mutable_vector(self._code_index).SetFromVector(code.astype(np.float64))
         if self._pca is not None:

@@ -94,7 +94,10 @@ class GoalModelConfig:
       n_iter: Baum-Welch iteration budget per run.
       tol: convergence threshold on the gain of total log-likelihood (nats).
       covar_reg: M-step covariance regulariser, relative to the mean
-        per-dimension variance of the training frames.
+        per-dimension variance of the training frames (docs/method.md
+        section 4: with 2-3 demonstrations a state's frames are few and
+        nearly alike, so this sets how far a new execution may differ from
+        them and still be in the state).
       random_state: seed of every random restart.
     """
 
@@ -105,7 +108,7 @@ class GoalModelConfig:
     n_restarts: int = 4
     n_iter: int = 100
     tol: float = 1e-3
-    covar_reg: float = 1e-3
+    covar_reg: float = 0.03
     random_state: int = 0
 
 

@@ -212,6 +212,8 @@ def add_goal_pipeline(builder, station, skill) -> GoalPipeline:
     reward = builder.AddNamedSystem("pomrp_reward", PomrpReward(skill.pomrp, PomrpRewardConfig(period=period)))
     builder.Connect(segmenter.get_object_points_output_port(), featurizer.get_object_points_input_port())
     builder.Connect(segmenter.get_valid_output_port(), featurizer.get_valid_input_port())
+    if skill.config.cloud_frame == "object":
+        builder.Connect(segmenter.get_X_WO_output_port(), featurizer.get_X_WO_input_port())
     builder.Connect(featurizer.get_goal_data_output_port(), reward.GetInputPort("goal_data"))
     builder.Connect(featurizer.get_goal_valid_output_port(), reward.GetInputPort("valid"))
     return GoalPipeline(segmenter, featurizer, reward)
