@@ -49,18 +49,6 @@ def test_fitted_skill_has_thesis_structure(close_skill):
     assert all(skill.info["demo_verdicts"])
 
 
-# Known regression, kept visible (strict: the test fails again the day it passes): on the
-# station with weight, friction and the reflex (issue 10), the scripted Close demonstrations
-# each end in a goal-HMM state of their own (the object's pose on the table changes its
-# PCAE code: the encoder's input is centred but not yawed into the object frame), so a
-# demonstration held out of the fit, or a new scripted Close, ends in a state that is not
-# terminal. The thesis's plain verdict fails the same way (off-model guard off); fewer
-# states (AIC k <= 4..6, or BIC) do not fix it. See the issue-10/13 notes.
-_HELD_OUT_VERDICT_REGRESSION = pytest.mark.xfail(
-    strict=True, reason="held-out Close demonstrations end in a non-terminal goal state on the issue-10 station")
-
-
-@_HELD_OUT_VERDICT_REGRESSION
 def test_goal_model_judges_held_out_demo_and_parked_arm(close_skill, close_data):
     _, held_out, (parked_points, parked_valid, parked_X_WO) = close_data
     G_demo = close_skill.goal_data(held_out.object_points, held_out.perception_valid, X_WO=held_out.X_WO_start)
@@ -145,7 +133,6 @@ def _run_pipeline(skill, plan_for, seed, duration):
     return pipeline.reward.verdict(reward_context), pipeline.reward.smoothed_return(reward_context), G
 
 
-@_HELD_OUT_VERDICT_REGRESSION
 def test_goal_pipeline_in_the_diagram_rewards_closing_over_parking(close_skill):
     """The ARCHITECTURE chain, simulated: a scripted Close earns a success verdict and a
     higher return per frame than the parked arm, from the camera alone."""
