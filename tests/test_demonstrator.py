@@ -156,6 +156,14 @@ def test_record_many_retries_failed_variations(draw_demonstrator, monkeypatch):
     monkeypatch.setattr(draw_demonstrator, "config", _fast(seed=6, count=1, max_attempts=1))
     with pytest.raises(RuntimeError, match="1 variations in a row failed"):
         draw_demonstrator.record_many(progress=False)
+    # A successful variation that pressed harder than max_force_fraction of the reflex limit is rejected too.
+    force = demos[0].metadata["peak_contact_force_N"]
+    limit = draw_demonstrator.sim.config.reflex.contact_force_max
+    assert 0.0 < force <= 0.8 * limit
+    monkeypatch.setattr(draw_demonstrator, "config", _fast(seed=7, count=1, max_attempts=1,
+                                                           max_force_fraction=0.5 * force / limit))
+    with pytest.raises(RuntimeError, match=f"pressed harder than {0.5 * force:.0f} N"):
+        draw_demonstrator.record_many(progress=False)
 
 
 def test_perception_is_recorded_at_10_hz_on_the_action_instants():

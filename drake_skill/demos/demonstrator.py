@@ -83,6 +83,11 @@ class DemonstratorConfig:
       (``drake_skill.station.scripted.FOLLOW_THROUGH``: 0 just past the
       tipping angle or travel threshold, 1 the scripted motion), as a person
       stops pushing once the object looks done.
+    max_force_fraction: a demonstration whose peak robot-scene contact force
+      exceeds this fraction of the collision reflex's limit
+      (``StationConfig.reflex.contact_force_max``) is rejected like a failed
+      one, as a person who feels the hand press on the object starts again
+      (1: keep every successful one).
     settle_time: the last keyframe is held this long before the recording ends [s]
       (at least the scenario's ``success.settle_time``, the judge's settle phase).
     max_attempts: seeds tried per demonstration before giving up.
@@ -107,6 +112,7 @@ class DemonstratorConfig:
     pause_range: list[float] = dc.field(default_factory=lambda: [0.2, 0.8])
     overshoot: float = 0.02
     follow_through_range: list[float] = dc.field(default_factory=lambda: [0.2, 1.0])
+    max_force_fraction: float = 0.8
     settle_time: float = 0.5
     max_attempts: int = 10
     record_hz: float = 100.0
@@ -133,6 +139,8 @@ class DemonstratorConfig:
         r = self.follow_through_range
         if len(r) != 2 or not 0.0 <= r[0] <= r[1] <= 1.0:
             bad("follow_through_range", r, "[min, max] with 0 <= min <= max <= 1")
+        if not (math.isfinite(self.max_force_fraction) and 0.0 < self.max_force_fraction <= 1.0):
+            bad("max_force_fraction", self.max_force_fraction, "a fraction in (0, 1]")
         if self.max_attempts < 1:
             bad("max_attempts", self.max_attempts, "at least 1")
         if not (self.action_hz > 0 and self.record_hz >= self.action_hz):
@@ -300,7 +308,8 @@ class ScriptedDemonstrator:
                     on_attempt: Callable[[int, Demonstration], None] | None = None) -> list[Demonstration]:
         """``count`` (default: config) successful demonstrations on successive seeds.
 
-        A seed whose variation fails is skipped (the next seed is tried; at
+        A seed whose variation fails, or presses harder than
+        ``max_force_fraction`` of the reflex limit, is skipped (the next seed is tried; at
         most ``max_attempts`` per demonstration, else RuntimeError). Each
         demonstration's ``metadata["rejected_seeds"]`` lists the seeds skipped
         just before it.
@@ -308,6 +317,7 @@ class ScriptedDemonstrator:
         from tqdm import tqdm
 
         count = self.config.count_for(self.skill) if count is None else int(count)
+        force_limit = self.config.max_force_fraction * self.sim.config.reflex.contact_force_max
         demos, seed = [], int(self.config.seed)
         bar = tqdm(total=count, desc=f"{self.skill} demonstrations", unit="demo", disable=not progress)
         try:
@@ -318,15 +328,17 @@ class ScriptedDemonstrator:
                     if on_attempt is not None:
                         on_attempt(seed, demo)
                     seed += 1
-                    if demo.success:
+                    force = float(demo.metadata["peak_contact_force_N"])
+                    if demo.success and force <= force_limit:
                         break
                     rejected.append(seed - 1)
-                    bar.set_postfix_str(f"seed {seed - 1} failed ({demo.final_object_state:.3f}); retrying")
+                    why = f"failed ({demo.final_object_state:.3f})" if not demo.success else f"pressed {force:.0f} N"
+                    bar.set_postfix_str(f"seed {seed - 1} {why}; retrying")
                 else:
                     raise RuntimeError(
-                        f"{self.skill}: {self.config.max_attempts} variations in a row failed "
-                        f"(seeds {rejected[0]}..{rejected[-1]}); reduce the variation "
-                        "(time_scale_range, path_noise, grasp_offset, overshoot)")
+                        f"{self.skill}: {self.config.max_attempts} variations in a row failed or pressed harder "
+                        f"than {force_limit:.0f} N (seeds {rejected[0]}..{rejected[-1]}); reduce the variation "
+                        "(time_scale_range, path_noise, grasp_offset, overshoot) or raise max_force_fraction")
                 demo.metadata["rejected_seeds"] = rejected
                 demos.append(demo)
                 bar.set_postfix_str(f"seed {demo.seed}: {demo.final_object_state:.3f}")
