@@ -4,6 +4,7 @@ one render and one segmentation per camera frame."""
 
 import numpy as np
 import pytest
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
@@ -110,10 +111,8 @@ def test_rollout_return_equals_offline_return_of_its_clouds(skill, monkeypatch):
         result = process_frame(xyz, rgb, plane, config.segmentation, shape, n_points=config.n_points, seed=config.seed)
         if result.valid:
             if X_WO_first is None:      # the object frame of the run's first valid frame
-                c, s_ = np.cos(result.box.yaw), np.sin(result.box.yaw)
-                X_WO_first = np.eye(4)
-                X_WO_first[:3, :3] = [[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]]
-                X_WO_first[:3, 3] = result.box.position
+                X_WO_first = RigidTransform(RotationMatrix.MakeZRotation(result.box.yaw),
+                                            result.box.position).GetAsMatrix4()
             points = cloud_in_object_frame(result.points, X_WO_first)
             goal.append(skill.goal_features.transform(encoder.encode_points(points)))
     G = np.array(goal)

@@ -159,8 +159,16 @@ def evaluate_greedy(pool, weights, seeds, progress: Callable | None = None) -> t
     """
     seeds = [int(s) for s in seeds]
     results = pool.map([(weights, s) for s in seeds], progress)
-    report = {
-        "seeds": seeds,
+    return results_report(seeds, results), results
+
+
+def results_report(seeds, results) -> dict[str, Any]:
+    """JSON-able summary of rollouts on the poses of ``seeds``: ground-truth
+    ``success_rate`` and ``successes``, ``verdicts``, ``returns`` (0 for a
+    failed rollout), ``final_object_state`` (None where failed), ``failures``
+    (reason -> count) and ``ik_warnings``."""
+    return {
+        "seeds": [int(s) for s in seeds],
         "success_rate": float(np.mean([r.success for r in results])) if results else float("nan"),
         "successes": [bool(r.success) for r in results],
         "verdicts": [bool(r.verdict) for r in results],
@@ -170,7 +178,6 @@ def evaluate_greedy(pool, weights, seeds, progress: Callable | None = None) -> t
         "failures": dict(Counter(r.reason for r in results if r.failed)),
         "ik_warnings": int(sum(r.ik_warnings for r in results)),
     }
-    return report, results
 
 
 def exploration_size(search) -> float:
@@ -577,41 +584,45 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
             results = pool.map([(w, s) for w, s in zip(samples, seeds)], lambda i, r: bar.update(1))
     finally:
         bar.close()
-    returns = np.array([r.dense_return for r in results], dtype=float)
-    finals = [None if not math.isfinite(r.final_object_state) else float(r.final_object_state) for r in results]
-    return {"skill": skill.name, "skill_dir": str(Path(skill_dir)), "seeds": seeds,
-            "object_pose": rollout_config.object_pose, "returns": returns.tolist(),
-            "return_spread": {"min": float(returns.min()), "median": float(np.median(returns)),
-                              "max": float(returns.max()), "std": float(returns.std())},
-            "successes": [bool(r.success) for r in results], "success_rate": float(np.mean([r.success for r in results])),
-            "final_object_state": finals, "failures": dict(Counter(r.reason for r in results if r.failed)),
-            "wall_s": round(time.perf_counter() - start, 1)}
+    report = {"skill": skill.name, "skill_dir": str(Path(skill_dir)), "object_pose": rollout_config.object_pose,
+              **results_report(seeds, results)}
+    returns = np.array(report["returns"])
+    report["return_spread"] = {"min": float(returns.min()), "median": float(np.median(returns)),
+                               "max": float(returns.max()), "std": float(returns.std())}
+    report["wall_s"] = round(time.perf_counter() - start, 1)
+    return report
+
+
+def _final_state_text(finals) -> str:
+    """Median (min..max) of the final object states that exist, or "-"."""
+    finals = [v for v in finals if v is not None]
+    return f"{np.median(finals):.2f} ({min(finals):.2f}..{max(finals):.2f})" if finals else "-"
+
+
+def _failures_text(failures: dict) -> str:
+    return ", ".join(f"{k} {v}" for k, v in sorted(failures.items())) or "-"
 
 
 def exploration_table(report: dict[str, Any]) -> str:
     """The people's view of :func:`explore_skill`'s report."""
     s = report["return_spread"]
-    finals = [v for v in report["final_object_state"] if v is not None]
-    failures = ", ".join(f"{k} {v}" for k, v in sorted(report["failures"].items())) or "-"
-    state = f"{np.median(finals):.2f} ({min(finals):.2f}..{max(finals):.2f})" if finals else "-"
     return "\n".join([
         f"{report['skill']}: {len(report['seeds'])} exploratory rollouts from Sigma_0 (seeds {report['seeds'][0]}.."
         f"{report['seeds'][-1]}), {report['wall_s']} s",
         f"  return: min {s['min']:.1f}, median {s['median']:.1f}, max {s['max']:.1f}, std {s['std']:.1f}",
-        f"  success {report['success_rate'] * 100:.0f}%, final state {state}, failures {failures}"])
+        f"  success {report['success_rate'] * 100:.0f}%, final state {_final_state_text(report['final_object_state'])}, "
+        f"failures {_failures_text(report['failures'])}"])
 
 
 def evaluation_table(report: dict[str, Any]) -> str:
     """The people's view of :func:`evaluate_skill`'s report."""
-    lines = [f"{'policy':<22}{'success':>9}{'verdict':>9}{'mean R':>9}{'final state':>20}  failures"]
+    lines = [f"{'policy':<22}{'success':>9}{'verdict':>9}{'mean R':>9}{'final state':>22}  failures"]
     for index, p in report["policies"].items():
-        finals = [v for v in p["final_object_state"] if v is not None]
-        spread = f"{np.median(finals):.2f} ({min(finals):.2f}..{max(finals):.2f})" if finals else "-"
         name = f"DMP {index}" + (" (learned)" if p["initial"] and report.get("learned") else
                                  " (initial)" if p["initial"] else "")
-        failures = ", ".join(f"{k} {v}" for k, v in sorted(p["failures"].items())) or "-"
         lines.append(f"{name:<22}{p['success_rate'] * 100:>8.0f}%{np.mean(p['verdicts']) * 100:>8.0f}%"
-                     f"{np.mean(p['returns']):>9.1f}{spread:>20}  {failures}")
+                     f"{np.mean(p['returns']):>9.1f}{_final_state_text(p['final_object_state']):>22}  "
+                     f"{_failures_text(p['failures'])}")
     lines.append(f"{report['skill']}: {len(report['seeds'])} held-out poses (seeds {report['seeds'][0]}.."
                  f"{report['seeds'][-1]}), object frame {report['object_pose']}, {report['wall_s']} s")
     return "\n".join(lines)
