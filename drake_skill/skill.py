@@ -6,6 +6,9 @@
    the object frame; the initial policy weights are one of them (drawn by
    seed) and the per-basis exploration covariances Sigma_b^0 their sample
    covariance plus a ridge (``drake_skill.action.dmp.fit_demonstrations``);
+   the gripper is not part of the DMP: the skill holds the demonstrations'
+   finger opening (``gripper_opening``, the median of their commanded
+   openings) for the whole execution (docs/method.md section 2);
 2. perception: every demonstration frame's segmented object cloud (2048
    points), expressed in the demonstration's perceived object frame
    (``SkillConfig.cloud_frame``), is encoded by the PCAE into a 128-D code (frames where the object
@@ -41,8 +44,9 @@ from drake_skill import fileio
 from drake_skill.perception.features import GoalFeatures, GoalFeaturesConfig
 from drake_skill.reward.pomrp import Pomrp, PomrpConfig, fit_pomrp
 from drake_skill.common import SKILLS
+from drake_skill.station.limits import FINGER_MAX
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 
 # Thesis Table 6.1 (simulation: Open 20, Close 10; real robot: Draw 9).
 DEFAULT_BASES = {"open": 20, "close": 10, "draw": 9}
@@ -138,7 +142,9 @@ class Skill:
     dmps: one per demonstration; initial_index: the DMP policy search starts
     from; sigma0: (B, 7, 7) Sigma_b^0; goal_features: fitted PCA; pomrp: goal
     HMM + state values; pcae_weights: path of the encoder weights;
-    info: JSON-able summary (explained variance, demonstration names, ...).
+    info: JSON-able summary (explained variance, demonstration names, ...);
+    gripper_opening: the finger opening [m] commanded throughout an
+    execution (:func:`gripper_opening`).
     """
 
     config: SkillConfig
@@ -149,6 +155,7 @@ class Skill:
     pomrp: Pomrp
     pcae_weights: Path
     info: dict
+    gripper_opening: float = 0.0
 
     @property
     def name(self) -> str:
@@ -205,7 +212,8 @@ class Skill:
         hmm = self.pomrp.goal_model
         lines = [
             f"skill '{self.name}': {len(self.dmps)} demonstrations, DMP B = {self.config.dmp.n_basis}, "
-            f"initial weights from demonstration {self.initial_index}",
+            f"initial weights from demonstration {self.initial_index}, "
+            f"finger opening {1000 * self.gripper_opening:.0f} mm",
             f"PCA 128 -> {self.goal_features.n_components}: explained variance "
             f"{100 * self.info['pca_explained_variance']:.1f} %",
             f"goal HMM: {hmm.n_states_} states ({hmm.covariance_type_} covariance, "
@@ -242,7 +250,8 @@ class Skill:
         if directory.is_dir() and any(directory.iterdir()) and not (directory / "skill.json").exists():
             raise FileExistsError(f"{directory}: exists, is not empty and holds no skill; choose an empty "
                                   "or new folder for the skill")
-        arrays = {"sigma0": self.sigma0, "initial_index": np.array(self.initial_index)}
+        arrays = {"sigma0": self.sigma0, "initial_index": np.array(self.initial_index),
+                  "gripper_opening": np.array(float(self.gripper_opening))}
         for i, dmp in enumerate(self.dmps):
             arrays.update(dmp.to_arrays(prefix=f"dmp{i}_"))
         arrays.update({f"pca_{k}": v for k, v in self.goal_features.to_arrays().items()})
@@ -317,7 +326,7 @@ class Skill:
 
 
 _SKILL_FILES = ("pcae.safetensors", "arrays.npz", "skill.yaml")
-_READABLE_VERSIONS = (1, 2, 3)
+_READABLE_VERSIONS = (1, 2, 3, 4)
 
 
 def _check_checksums(directory: Path, meta: dict, version: int) -> None:
@@ -426,7 +435,37 @@ def _skill_from_arrays(config: SkillConfig, arrays: dict, meta: dict, weights: P
     info = meta.get("info")
     if not isinstance(info, dict):
         raise ValueError(f"{json_path}: field 'info' missing or not an object")
-    return Skill(config, dmps, int(raw_index), sigma0, pca, pomrp, weights, info)
+    # Skills before version 4 held the fingers closed (0 m) in every execution.
+    opening = 0.0
+    if version >= 4:
+        raw = np.asarray(arrays.get("gripper_opening", np.nan))
+        if raw.shape != () or not np.isfinite(raw) or not 0.0 <= float(raw) <= 2 * FINGER_MAX:
+            raise ValueError(f"gripper_opening: {raw.tolist()!r}, expected a finger opening in "
+                             f"[0, {2 * FINGER_MAX}] m")
+        opening = float(raw)
+    return Skill(config, dmps, int(raw_index), sigma0, pca, pomrp, weights, info, opening)
+
+
+def gripper_opening(demos: Sequence) -> float:
+    """The finger opening [m] a skill commands throughout an execution.
+
+    The action model is the 7-D hand pose (docs/method.md section 2); the
+    thesis's skills keep the gripper as it is during the skill, so the
+    opening is a constant of the skill: the median over the demonstrations
+    of each one's median commanded opening (``gripper_100hz``). A
+    demonstration without a gripper record counts as closed (0 m).
+    """
+    per_demo = []
+    for i, demo in enumerate(demos):
+        grip = getattr(demo, "gripper_100hz", None)
+        if grip is None:
+            per_demo.append(0.0)
+            continue
+        grip = np.asarray(grip, dtype=float)
+        if grip.size == 0 or not np.all(np.isfinite(grip)):
+            raise ValueError(f"demos[{i}].gripper_100hz: empty or not finite; record the demonstration again")
+        per_demo.append(float(np.median(grip)))
+    return float(np.clip(np.median(per_demo), 0.0, 2 * FINGER_MAX))
 
 
 def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
@@ -484,6 +523,7 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
                        if isinstance(getattr(d, "metadata", None), dict) else f"demo {i}"
                        for i, d in enumerate(demos)],
     }
-    skill = Skill(config, fit.dmps, fit.initial_index, fit.sigma0, pca, pomrp, weights, info)
+    skill = Skill(config, fit.dmps, fit.initial_index, fit.sigma0, pca, pomrp, weights, info,
+                  gripper_opening(demos))
     skill._encoder = encoder
     return skill

@@ -52,7 +52,8 @@ def synthetic_skill(seed: int = 0) -> Skill:
     info = {"pca_explained_variance": float(pca.total_explained_variance_ratio),
             "demo_lengths": lengths.tolist(), "demo_returns": [pomrp.episode_return(G) for G in goal],
             "demo_verdicts": [pomrp.verdict(G) for G in goal], "seed": seed}
-    return Skill(config, fit.dmps, fit.initial_index, fit.sigma0, pca, pomrp, DEFAULT_WEIGHTS, info)
+    return Skill(config, fit.dmps, fit.initial_index, fit.sigma0, pca, pomrp, DEFAULT_WEIGHTS, info,
+                 gripper_opening=0.08)
 
 
 @pytest.fixture(scope="module")
@@ -182,6 +183,28 @@ def test_version_1_skill_still_loads(saved_skill, tmp_path):
     assert skill.config.cloud_frame == "world"  # and world-frame clouds
     assert not skill.pomrp.off_model_config.enabled and not skill.config.pomrp.off_model.enabled
     assert np.isfinite(skill.dense_return(skill.pomrp.goal_model.sample(20, 0)[0]))
+
+
+def test_version_3_skill_holds_the_fingers_closed(saved_skill, tmp_path):
+    """A skill saved before schema 4 has no gripper_opening: it was executed with closed fingers."""
+    assert Skill.load(saved_skill).gripper_opening == pytest.approx(0.08)
+    directory = _copy(saved_skill, tmp_path)
+    arrays = load_npz(directory / "arrays.npz")
+    arrays.pop("gripper_opening")
+    atomic_save_npz(directory / "arrays.npz", arrays)
+    meta = json.loads((directory / "skill.json").read_text())
+    meta["schema_version"] = 3
+    meta["sha256"]["arrays.npz"] = file_sha256(directory / "arrays.npz")
+    (directory / "skill.json").write_text(json.dumps(meta))
+    assert Skill.load(directory).gripper_opening == 0.0
+
+
+@pytest.mark.parametrize("value", [0.5, -0.01, np.nan])
+def test_out_of_range_gripper_opening_is_refused(saved_skill, tmp_path, value):
+    directory = _copy(saved_skill, tmp_path)
+    _rewrite_arrays(directory, gripper_opening=np.array(value))
+    with pytest.raises(ValueError, match=r"gripper_opening: .* expected a finger opening in \[0, 0.08\] m"):
+        Skill.load(directory)
 
 
 def test_version_2_skill_encodes_world_frame_clouds(saved_skill, tmp_path):

@@ -3,7 +3,7 @@
 The diagram (docs/architecture.md, "One diagram per skill execution")::
 
     [ObjectPoseSource] --X_WO--> [DmpSystem] --X_WE_desired--> [Station (EndEffectorController inside)]
-                                                  gripper 0 --> [Station]
+                    gripper_opening (the skill's) --> [Station]
     [Station] --point_cloud--> [ObjectSegmenter] --> [PcaeFeaturizer] --> [PomrpReward]
 
 built by :class:`RolloutRunner` from a fitted :class:`~drake_skill.skill.Skill`
@@ -167,7 +167,7 @@ class RolloutConfig:
 
 @dc.dataclass
 class ActionModel:
-    """A skill without a goal model: name, DMP and DMP hyper-parameters.
+    """A skill without a goal model: name, DMP, DMP hyper-parameters, finger opening [m].
 
     Stands in for a :class:`~drake_skill.skill.Skill` where only the action
     model matters (ground-truth success of an imitation, no learned reward).
@@ -176,6 +176,7 @@ class ActionModel:
     name: str
     initial_dmp: Dmp
     dmp_config: DmpConfig
+    gripper_opening: float = 0.0
 
 
 def _X_from_vector(v) -> RigidTransform:
@@ -319,7 +320,8 @@ class RolloutRunner:
         self.pose_source = builder.AddNamedSystem("object_pose", ObjectPoseSource())
         self.dmp_system = builder.AddNamedSystem("dmp", DmpSystem(skill.initial_dmp, dmp_config))
         self.dmp_config = self.dmp_system.config
-        gripper = builder.AddNamedSystem("gripper", ConstantVectorSource([0.0]))
+        # The skill's constant finger opening (docs/method.md section 2).
+        gripper = builder.AddNamedSystem("gripper", ConstantVectorSource([float(skill.gripper_opening)]))
         builder.Connect(self.pose_source.GetOutputPort("X_WO"), self.dmp_system.get_X_WO_input_port())
         builder.Connect(self.dmp_system.get_X_WE_desired_output_port(),
                         self.station.GetInputPort("ee_pose_desired"))
