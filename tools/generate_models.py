@@ -271,11 +271,16 @@ TCP_Z = 0.1034
 # (as a 0.055 x 0.20 x 0.06 m box of 0.73 kg would have it), the smallest
 # about y_H.
 HAND_INERTIA = (0.0025, 0.0, 0.0, 0.001, 0.0, 0.0017)
+# The dark flange plate (visual only) sits 0.5 mm below the hand body's bottom
+# face: with the two faces coplanar the renderer picks either colour per pixel
+# by depth-buffer rounding, and a cropped camera's pixels differ from the full
+# frame's there (issue 11).
+HAND_BASE_Z = 0.0045
 
 
 def panda_hand() -> str:
     body = f"""    <link name="panda_hand">
-{_inertial(0.73, (-0.01, 0.0, 0.03), HAND_INERTIA)}{_box("hand_body", (0, 0, 0.03), (0.055, 0.20, 0.06), WHITE)}{_box("hand_base", (0, 0, 0.005), (0.06, 0.07, 0.01), DARK, collision=False)}    </link>
+{_inertial(0.73, (-0.01, 0.0, 0.03), HAND_INERTIA)}{_box("hand_body", (0, 0, 0.03), (0.055, 0.20, 0.06), WHITE)}{_box("hand_base", (0, 0, HAND_BASE_Z), (0.06, 0.07, 0.01), DARK, collision=False)}    </link>
     <frame name="panda_tcp" attached_to="panda_hand">
       <pose relative_to="panda_hand">0 0 {TCP_Z} 0 0 0</pose>
     </frame>
