@@ -37,7 +37,9 @@ def test_pose_seeds_are_fixed_and_distinct():
 def test_learn_config_errors_name_the_field():
     for changes, field in (({"method": "sgd"}, "method"), ({"reward": "shaped"}, "reward"),
                            ({"episodes": 0}, "episodes"), ({"method": "power", "weighting": "range"}, "weighting"),
-                           ({"method": "cma-es", "rollouts": 1}, "rollouts"), ({"held_out": -1}, "held_out")):
+                           ({"method": "cma-es", "rollouts": 1}, "rollouts"), ({"held_out": -1}, "held_out"),
+                           ({"exploration_scale": 0.0}, "exploration_scale"),
+                           ({"exploration_scale": float("nan")}, "exploration_scale")):
         with pytest.raises(ValueError, match=field):
             LearnConfig(**changes).validate()
     assert LearnConfig().search_options() == {"n_episodes": 5, "seed": 0}

@@ -44,6 +44,8 @@ _METHODS = ("power", "pi2", "pi2-cov", "pi2-es", "pi2-es-cov", "cma-es")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from drake_skill.learning.loop import DEFAULT_EXPLORATION_SCALE
+
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     source = parser.add_argument_group("skill")
@@ -61,6 +63,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(exp(h (R - min)/(max - min))); default: the method's")
     search.add_argument("--episodes", type=int, default=5, help="updates (default 5)")
     search.add_argument("--rollouts", type=int, default=6, help="rollouts per update (default 6)")
+    search.add_argument("--exploration-scale", type=float, default=DEFAULT_EXPLORATION_SCALE, metavar="S",
+                        help="sigma_0 of thesis Eq. 5.3: the first episode explores with S x Sigma_0, the "
+                             f"demonstrations' weight covariance (default {DEFAULT_EXPLORATION_SCALE:g}; "
+                             "the thesis: 1)")
     search.add_argument("--seed", type=int, default=0, help="policy search and object-pose seed (default 0)")
     search.add_argument("--held-out", type=int, default=10,
                         help="held-out object poses for greedy success before and after (0: off; default 10)")
@@ -170,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
     skill_name = Skill.load(skill_dir).name
     config = LearnConfig(method=args.method, reward=args.reward, weighting=args.weighting or "",
                          episodes=args.episodes, rollouts=args.rollouts, seed=args.seed,
-                         held_out=args.held_out)
+                         held_out=args.held_out, exploration_scale=args.exploration_scale)
     rollout = RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived")
     meshcat = None
     if args.meshcat:

@@ -74,7 +74,9 @@ class DemonstratorConfig:
       keyframe of a demonstration, per axis of O [m].
     orientation_noise_deg: standard deviation of a random rotation (about a
       random axis) of each via point's hand orientation [deg].
-    pause_probability: probability of a hesitation at one random keyframe.
+    pause_probability: probability of a hesitation at one random keyframe
+      (default 0: timing differences between demonstrations go into Sigma_0,
+      docs/method.md section 6).
     pause_range: its duration, uniform in [min, max] [s].
     overshoot: the approach (first move from home) goes this far past its
       target before settling back [m]; scaled by a uniform factor in [0.5, 1].
@@ -104,11 +106,11 @@ class DemonstratorConfig:
 
     count: int = 0
     seed: int = 0
-    time_scale_range: float = 0.2
+    time_scale_range: float = 0.05
     path_noise: float = 0.003
     grasp_offset: float = 0.004
     orientation_noise_deg: float = 2.0
-    pause_probability: float = 0.5
+    pause_probability: float = 0.0
     pause_range: list[float] = dc.field(default_factory=lambda: [0.2, 0.8])
     overshoot: float = 0.02
     follow_through_range: list[float] = dc.field(default_factory=lambda: [0.2, 1.0])

@@ -66,6 +66,9 @@ ARTIFACTS = ("config.json", "results.jsonl", "summary.json", "learning_curve.png
              "replay_first.html", "replay_last.html", "checkpoint/")
 
 REWARDS = ("dense", "sparse")
+
+#: sigma_0 (thesis Eq. 5.3) of ``LearnConfig.exploration_scale`` and ``explore_skill``.
+DEFAULT_EXPLORATION_SCALE = 0.1
 _CHECKPOINT_FORMAT = 1
 
 
@@ -81,6 +84,10 @@ class LearnConfig:
     seed: policy search and pose seeds.
     held_out: greedy success over this many held-out poses before and after
       learning (0: off); held_out_seed0: their first seed.
+    exploration_scale: sigma_0 of thesis Eq. 5.3: the first episode samples
+      ``w_b ~ N(w_b, exploration_scale * Sigma_b^0)`` (every method starts
+      from that covariance; the covariance floor follows it). The thesis
+      sets it to 1; the default is smaller (docs/method.md section 5).
     """
 
     method: str = "pi2-es-cov"
@@ -91,6 +98,7 @@ class LearnConfig:
     seed: int = 0
     held_out: int = 10
     held_out_seed0: int = HELD_OUT_SEED0
+    exploration_scale: float = DEFAULT_EXPLORATION_SCALE
 
     def validate(self) -> "LearnConfig":
         def bad(field, value, expected):
@@ -111,6 +119,8 @@ class LearnConfig:
             bad("rollouts", self.rollouts, f"at least {min_rollouts} per episode for {self.method}")
         if int(self.held_out) < 0:
             bad("held_out", self.held_out, "0 (off) or a number of poses")
+        if not (math.isfinite(self.exploration_scale) and 0 < self.exploration_scale <= 100):
+            bad("exploration_scale", self.exploration_scale, "a factor in (0, 100] on Sigma_b^0")
         return self
 
     def search_options(self) -> dict[str, Any]:
@@ -337,8 +347,8 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
                      "replay_last.html"):
             (out_dir / name).unlink(missing_ok=True)
         atomic_write_json(out_dir / "config.json", run_config)
-        search = make_policy_search(config.method, skill.initial_weights, skill.sigma0,
-                                    **config.search_options())
+        search = make_policy_search(config.method, skill.initial_weights,
+                                    config.exploration_scale * skill.sigma0, **config.search_options())
         records, curve, held_out_before, pending = [], [], None, None
     per_step = config.method in PER_STEP_METHODS
     weighting = search.state_dict().get("option_weighting")   # the method's default when not given
@@ -552,10 +562,10 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
 
 def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0, station_config=None,
                   rollout_config=None, workers: int = 1, ray_address: str | None = None,
-                  progress: bool = True) -> dict[str, Any]:
+                  progress: bool = True, exploration_scale: float = DEFAULT_EXPLORATION_SCALE) -> dict[str, Any]:
     """Exploratory rollouts of a fitted skill: what the first episode of policy search sees.
 
-    Draws ``rollouts`` weight samples ``W ~ N(W_0, Sigma_b^0)`` per basis
+    Draws ``rollouts`` weight samples ``W ~ N(W_0, exploration_scale * Sigma_b^0)`` per basis
     (PI^2-ES-Cov's first ``ask``, seeded by ``seed0``) and executes each on
     the pose of seed ``seed0 + i``. Returns a JSON-able report: the returns
     (learned dense reward; 0 for a failed rollout), their spread (min,
@@ -572,7 +582,10 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     skill = Skill.load(skill_dir)
     station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
     rollout_config = (rollout_config or RolloutConfig()).validate()
-    samples = make_policy_search("pi2-es-cov", skill.initial_weights, skill.sigma0, seed=int(seed0)).ask(int(rollouts))
+    if not (math.isfinite(exploration_scale) and exploration_scale > 0):
+        raise ValueError(f"exploration_scale: expected a factor > 0 on Sigma_b^0, got {exploration_scale!r}")
+    samples = make_policy_search("pi2-es-cov", skill.initial_weights, exploration_scale * skill.sigma0,
+                                 seed=int(seed0)).ask(int(rollouts))
     seeds = [int(seed0) + i for i in range(int(rollouts))]
     start = time.perf_counter()
     spec = RunnerSpec.create(skill_dir, station_config, rollout_config)
@@ -585,7 +598,7 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     finally:
         bar.close()
     report = {"skill": skill.name, "skill_dir": str(Path(skill_dir)), "object_pose": rollout_config.object_pose,
-              **results_report(seeds, results)}
+              "exploration_scale": float(exploration_scale), **results_report(seeds, results)}
     returns = np.array(report["returns"])
     report["return_spread"] = {"min": float(returns.min()), "median": float(np.median(returns)),
                                "max": float(returns.max()), "std": float(returns.std())}
@@ -607,7 +620,8 @@ def exploration_table(report: dict[str, Any]) -> str:
     """The people's view of :func:`explore_skill`'s report."""
     s = report["return_spread"]
     return "\n".join([
-        f"{report['skill']}: {len(report['seeds'])} exploratory rollouts from Sigma_0 (seeds {report['seeds'][0]}.."
+        f"{report['skill']}: {len(report['seeds'])} exploratory rollouts from "
+        f"{report.get('exploration_scale', 1.0):g} x Sigma_0 (seeds {report['seeds'][0]}.."
         f"{report['seeds'][-1]}), {report['wall_s']} s",
         f"  return: min {s['min']:.1f}, median {s['median']:.1f}, max {s['max']:.1f}, std {s['std']:.1f}",
         f"  success {report['success_rate'] * 100:.0f}%, final state {_final_state_text(report['final_object_state'])}, "
