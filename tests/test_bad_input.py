@@ -226,3 +226,15 @@ def test_version_2_skill_encodes_world_frame_clouds(saved_skill, tmp_path):
     skill.goal_data(points)                           # world frame: no pose needed
     with pytest.raises(ValueError, match="pass X_WO"):
         Skill.load(saved_skill).goal_data(points)
+
+
+def test_gripper_opening_is_the_demonstrations_median():
+    from types import SimpleNamespace
+
+    from drake_skill.skill import gripper_opening
+
+    demos = [SimpleNamespace(gripper_100hz=np.r_[0.0, np.full(9, w)]) for w in (0.08, 0.07, 0.078)]
+    assert gripper_opening(demos) == pytest.approx(0.078)
+    assert gripper_opening([SimpleNamespace(), SimpleNamespace()]) == 0.0      # no gripper record: closed
+    with pytest.raises(ValueError, match=r"demos\[1\].gripper_100hz: empty or not finite"):
+        gripper_opening([demos[0], SimpleNamespace(gripper_100hz=np.array([0.0, np.nan]))])

@@ -141,3 +141,22 @@ def test_rollout_with_the_goal_pipeline(reward_runner):
     # Another pose, then the first again: the same numbers (nothing per run on the runner).
     runner.run(skill.initial_weights, seed=22)
     assert a.equal_numbers(runner.run(skill.initial_weights, seed=a.seed))
+
+
+def test_the_skill_s_finger_opening_is_commanded(draw_setup):
+    """The rollout holds the skill's gripper_opening (docs/method.md section 2), not closed fingers."""
+    dmp, closed, _ = draw_setup
+    config = scenario_for_skill("draw")
+    config.enable_camera = False
+    opened = RolloutRunner(ActionModel("draw", dmp, DmpConfig(n_basis=30), gripper_opening=0.05), config,
+                           GROUND_TRUTH)
+    widths = []
+    for runner in (closed, opened):
+        runner.reset(dmp.weights, 5)
+        runner.simulator.AdvanceTo(1.0)       # the hand is still in free space
+        plant = runner.station.plant
+        ctx = plant.GetMyContextFromRoot(runner.context)
+        widths.append(sum(plant.GetJointByName(f"panda_finger_joint_{side}").get_translation(ctx)
+                          for side in ("left", "right")))
+    assert widths[0] == pytest.approx(0.0, abs=1e-3)
+    assert widths[1] == pytest.approx(0.05, abs=2e-3)
