@@ -69,6 +69,11 @@ REWARDS = ("dense", "sparse")
 
 #: sigma_0 (thesis Eq. 5.3) of ``LearnConfig.exploration_scale`` and ``explore_skill``.
 DEFAULT_EXPLORATION_SCALE = 0.1
+
+
+def _valid_exploration_scale(value) -> bool:
+    """An exploration scale is a finite factor in (0, 100] on Sigma_b^0."""
+    return math.isfinite(value) and 0 < value <= 100
 _CHECKPOINT_FORMAT = 1
 
 
@@ -119,7 +124,7 @@ class LearnConfig:
             bad("rollouts", self.rollouts, f"at least {min_rollouts} per episode for {self.method}")
         if int(self.held_out) < 0:
             bad("held_out", self.held_out, "0 (off) or a number of poses")
-        if not (math.isfinite(self.exploration_scale) and 0 < self.exploration_scale <= 100):
+        if not _valid_exploration_scale(self.exploration_scale):
             bad("exploration_scale", self.exploration_scale, "a factor in (0, 100] on Sigma_b^0")
         return self
 
@@ -582,8 +587,8 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     skill = Skill.load(skill_dir)
     station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
     rollout_config = (rollout_config or RolloutConfig()).validate()
-    if not (math.isfinite(exploration_scale) and exploration_scale > 0):
-        raise ValueError(f"exploration_scale: expected a factor > 0 on Sigma_b^0, got {exploration_scale!r}")
+    if not _valid_exploration_scale(exploration_scale):
+        raise ValueError(f"exploration_scale: expected a factor in (0, 100] on Sigma_b^0, got {exploration_scale!r}")
     samples = make_policy_search("pi2-es-cov", skill.initial_weights, exploration_scale * skill.sigma0,
                                  seed=int(seed0)).ask(int(rollouts))
     seeds = [int(seed0) + i for i in range(int(rollouts))]
@@ -621,7 +626,7 @@ def exploration_table(report: dict[str, Any]) -> str:
     s = report["return_spread"]
     return "\n".join([
         f"{report['skill']}: {len(report['seeds'])} exploratory rollouts from "
-        f"{report.get('exploration_scale', 1.0):g} x Sigma_0 (seeds {report['seeds'][0]}.."
+        f"{report['exploration_scale']:g} x Sigma_0 (seeds {report['seeds'][0]}.."
         f"{report['seeds'][-1]}), {report['wall_s']} s",
         f"  return: min {s['min']:.1f}, median {s['median']:.1f}, max {s['max']:.1f}, std {s['std']:.1f}",
         f"  success {report['success_rate'] * 100:.0f}%, final state {_final_state_text(report['final_object_state'])}, "
