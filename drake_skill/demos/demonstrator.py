@@ -50,7 +50,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_skill.demos.format import Demonstration, downsample_action, object_frame_poses
 from drake_skill.station.pose_source import PosePlan
-from drake_skill.station.simulation import StationRecorder, StationSimulation, pose_to_vector
+from drake_skill.station.simulation import ReflexError, StationRecorder, StationSimulation, pose_to_vector
 from drake_skill.station.success import judge_run
 from drake_skill.station.config import SKILLS, StationConfig, scenario_for_skill
 
@@ -310,8 +310,8 @@ class ScriptedDemonstrator:
                     on_attempt: Callable[[int, Demonstration], None] | None = None) -> list[Demonstration]:
         """``count`` (default: config) successful demonstrations on successive seeds.
 
-        A seed whose variation fails, or presses harder than
-        ``max_force_fraction`` of the reflex limit, is skipped (the next seed is tried; at
+        A seed whose variation fails, trips the collision reflex, or presses
+        harder than ``max_force_fraction`` of the reflex limit, is skipped (the next seed is tried; at
         most ``max_attempts`` per demonstration, else RuntimeError). Each
         demonstration's ``metadata["rejected_seeds"]`` lists the seeds skipped
         just before it.
@@ -326,21 +326,28 @@ class ScriptedDemonstrator:
             for _ in range(count):
                 rejected = []
                 for _attempt in range(self.config.max_attempts):
-                    demo = self.record(seed)
-                    if on_attempt is not None:
+                    try:
+                        demo = self.record(seed)
+                    except ReflexError as reflex:
+                        # The robot stopped itself: the person starts again, as after a failure.
+                        demo, why = None, f"reflex at {reflex.time_s:.1f} s ({reflex.force_N:.0f} N)"
+                    if demo is not None and on_attempt is not None:
                         on_attempt(seed, demo)
                     seed += 1
-                    force = float(demo.metadata["peak_contact_force_N"])
-                    if demo.success and force <= force_limit:
-                        break
+                    if demo is not None:
+                        force = float(demo.metadata["peak_contact_force_N"])
+                        if demo.success and force <= force_limit:
+                            break
+                        why = (f"failed ({demo.final_object_state:.3f})" if not demo.success
+                               else f"pressed {force:.0f} N")
                     rejected.append(seed - 1)
-                    why = f"failed ({demo.final_object_state:.3f})" if not demo.success else f"pressed {force:.0f} N"
                     bar.set_postfix_str(f"seed {seed - 1} {why}; retrying")
                 else:
                     raise RuntimeError(
-                        f"{self.skill}: {self.config.max_attempts} variations in a row failed or pressed harder "
-                        f"than {force_limit:.0f} N (seeds {rejected[0]}..{rejected[-1]}); reduce the variation "
-                        "(time_scale_range, path_noise, grasp_offset, overshoot) or raise max_force_fraction")
+                        f"{self.skill}: {self.config.max_attempts} variations in a row failed, tripped the reflex "
+                        f"or pressed harder than {force_limit:.0f} N (seeds {rejected[0]}..{rejected[-1]}; the last "
+                        f"{why}); reduce the variation (time_scale_range, path_noise, grasp_offset, overshoot) "
+                        "or raise max_force_fraction")
                 demo.metadata["rejected_seeds"] = rejected
                 demos.append(demo)
                 bar.set_postfix_str(f"seed {demo.seed}: {demo.final_object_state:.3f}")
