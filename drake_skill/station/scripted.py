@@ -55,6 +55,8 @@ CLOSE_START = 1.9       # the lid resting on its stay [rad]
 CLOSE_RELEASE = 1.2     # pulled this far (past the 1.48 rad tipping angle), the lid falls shut
 CLOSE_BEHIND = 0.03     # the approach starts this far behind the lid's face [m]
 CLOSE_PUSH = 0.004      # the fingertip path runs this far inside the face [m]
+CLOSE_APPROACH = 0.10   # the hand comes down to the lid from this far above [m]
+CLOSE_RADIUS = 0.19     # the fingertip pulls the lid this far from the hinge [m] (the lid is 0.225 m long)
 # Draw: the fingertip's centre between the drawer front (x = -0.16) and the
 # handle bar (x = -0.205, radius 8 mm, centre 0.14 m up), 7 mm below the bar.
 DRAW_TILT = np.deg2rad(20.0)
@@ -126,7 +128,7 @@ def keyframes(skill: str, follow_through: float = 1.0) -> list[tuple[float, np.n
         frames += [(t0 + 8.5, last_p + out, last_R, w),
                    (t0 + 9.5, last_p + out + [-0.05, 0.0, 0.08], last_R, w)]
     elif skill == "close":
-        radius, push = 0.19, CLOSE_PUSH
+        radius, push = CLOSE_RADIUS, CLOSE_PUSH
         theta0 = CLOSE_START
 
         def hand(theta):
@@ -143,7 +145,7 @@ def keyframes(skill: str, follow_through: float = 1.0) -> list[tuple[float, np.n
             return _xyz(tip) - TCP_TO_TIP * z_E
 
         start = tcp(theta0) + [CLOSE_BEHIND, 0.0, 0.0]
-        frames += [(2.5, start + [0.0, 0.0, 0.10], hand(theta0), 0.0),
+        frames += [(2.5, start + [0.0, 0.0, CLOSE_APPROACH], hand(theta0), 0.0),
                    (3.5, start, hand(theta0), 0.0),
                    (4.0, start, hand(theta0), 0.0)]
         # Pull the lid off its stay and over its tipping angle; past it, its
