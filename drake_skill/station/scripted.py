@@ -11,8 +11,12 @@ station's ``ee_pose_desired`` port takes. Positions are in metres.
   tipping angle (it falls open onto its stay by its weight), and leaves
   sideways.
 * Close: the hand points down, hooks the finger behind the lid resting open
-  on its stay and pulls it forward over its tipping angle; the lid falls shut
-  by its weight while the hand moves up out of its way.
+  on its stay and flicks it forward: a brisk pull that stops short of the
+  tipping angle, so the lid's momentum carries it over and its weight shuts
+  it while the hand moves up out of its way. A DMP (10 bases over ~9 s)
+  cannot reproduce a 0.2 s flick: it pulls as far but slower, and the lid
+  stops near its tipping angle or falls back onto its stay (docs/method.md
+  section 6).
 * Draw: the hand points down, tilted 20 degrees toward the robot, lowers the
   closed fingers between the drawer front and the handle bar, and pulls along
   -x_O.
@@ -52,10 +56,11 @@ OPEN_SWEEP_END = 1.75      # the lid is carried to this angle [rad], past its ti
 # Close: the hand's lean toward the robot per radian the lid is below 1.4 rad (up to 0.8).
 CLOSE_LEAN = 0.8
 CLOSE_START = 1.9       # the lid resting on its stay [rad]
-CLOSE_RELEASE = 1.2     # pulled this far (past the 1.48 rad tipping angle), the lid falls shut
+CLOSE_RELEASE = 1.64    # the flick stops here [rad], short of the 1.48 rad tipping angle: the lid's momentum carries it over
 CLOSE_BEHIND = 0.03     # the approach starts this far behind the lid's face [m]
 CLOSE_PUSH = 0.004      # the fingertip path runs this far inside the face [m]
 CLOSE_APPROACH = 0.10   # the hand comes down to the lid from this far above [m]
+CLOSE_PULL_TIME = 0.2   # the flick's duration, from the stay to CLOSE_RELEASE [s] (0.35 rad in 0.2 s)
 CLOSE_RADIUS = 0.19     # the fingertip pulls the lid this far from the hinge [m] (the lid is 0.225 m long)
 # Draw: the fingertip's centre between the drawer front (x = -0.16) and the
 # handle bar (x = -0.205, radius 8 mm, centre 0.14 m up), 7 mm below the bar.
@@ -76,9 +81,9 @@ def _xyz(xz):
 
 # How far each motion carries the object, at follow_through 0 (just past what
 # succeeds) and 1 (the scripted motion): the lid's angle at the end of the
-# Open sweep [rad], the lid's angle where Close lets go [rad], the drawer's
+# Open sweep [rad], the lid's angle where Close's flick stops [rad], the drawer's
 # travel [m].
-FOLLOW_THROUGH = {"open": (1.58, OPEN_SWEEP_END), "close": (1.38, CLOSE_RELEASE), "draw": (0.12, DRAW_TRAVEL)}
+FOLLOW_THROUGH = {"open": (1.58, OPEN_SWEEP_END), "close": (1.68, CLOSE_RELEASE), "draw": (0.12, DRAW_TRAVEL)}
 
 
 def keyframes(skill: str, follow_through: float = 1.0) -> list[tuple[float, np.ndarray, RotationMatrix, float]]:
@@ -148,10 +153,12 @@ def keyframes(skill: str, follow_through: float = 1.0) -> list[tuple[float, np.n
         frames += [(2.5, start + [0.0, 0.0, CLOSE_APPROACH], hand(theta0), 0.0),
                    (3.5, start, hand(theta0), 0.0),
                    (4.0, start, hand(theta0), 0.0)]
-        # Pull the lid off its stay and over its tipping angle; past it, its
-        # weight shuts it (the hand must not chase and press it).
+        # Flick the lid off its stay: pull briskly and stop short of its
+        # tipping angle; its momentum carries it over and its weight shuts it
+        # (the hand must not chase and press it). The hand then holds still.
         for i, theta in enumerate(np.linspace(theta0, carry, 5)[1:]):
-            frames.append((4.0 + 0.5 * (i + 1), tcp(theta), hand(theta), 0.0))
+            frames.append((4.0 + CLOSE_PULL_TIME * (i + 1) / 4, tcp(theta), hand(theta), 0.0))
+        frames.append((6.0, tcp(carry), hand(carry), 0.0))
         last = frames[-1][1]
         # Up, out of the falling lid's way, and toward the hinge.
         frames += [(6.5, last + [0.0, 0.0, 0.08], hand(carry), 0.0),
