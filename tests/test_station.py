@@ -189,7 +189,7 @@ def test_config_yaml_round_trip(tmp_path):
 
 def test_shipped_scenarios_are_yaml_files_in_the_package():
     from drake_skill.station.config import dump_station_config, scenario_path
-    for skill, kind, x, joint in (("open", "box", 0.62, 0.0), ("close", "box", 0.46, 1.9),
+    for skill, kind, x, joint in (("open", "box", 0.60, 0.0), ("close", "box", 0.46, 1.9),
                                   ("draw", "drawer", 0.68, 0.0)):
         path = scenario_path(skill)
         assert path.parent.name == "scenarios" and path.suffix == ".yaml" and path.is_file()

@@ -82,9 +82,9 @@ class DemonstratorConfig:
       target before settling back [m]; scaled by a uniform factor in [0.5, 1].
     follow_through_range: how far the motion carries the object, a fraction
       drawn uniform in [min, max] per demonstration
-      (``drake_skill.station.scripted.FOLLOW_THROUGH``: 0 just past the
-      tipping angle or travel threshold, 1 the scripted motion), as a person
-      stops pushing once the object looks done.
+      (``drake_skill.station.scripted.FOLLOW_THROUGH``: 0 the least that
+      still succeeds, 1 the scripted motion), as a person stops pushing once
+      the object looks done.
     max_force_fraction: a demonstration whose peak robot-scene contact force
       exceeds this fraction of the collision reflex's limit
       (``StationConfig.reflex.contact_force_max``) is rejected like a failed

@@ -79,8 +79,8 @@ def _xyz(xz):
     return np.array([xz[0], 0.0, xz[1]])
 
 
-# How far each motion carries the object, at follow_through 0 (just past what
-# succeeds) and 1 (the scripted motion): the lid's angle at the end of the
+# How far each motion carries the object, at follow_through 0 (the least that
+# still succeeds) and 1 (the scripted motion): the lid's angle at the end of the
 # Open sweep [rad], the lid's angle where Close's flick stops [rad], the drawer's
 # travel [m].
 FOLLOW_THROUGH = {"open": (1.58, OPEN_SWEEP_END), "close": (1.68, CLOSE_RELEASE), "draw": (0.12, DRAW_TRAVEL)}
@@ -90,9 +90,10 @@ def keyframes(skill: str, follow_through: float = 1.0) -> list[tuple[float, np.n
     """Keyframes (time [s], p_OE [m], R_OE, finger opening [m]) after a move from home.
 
     ``follow_through`` in [0, 1] sets how far the motion carries the object
-    (``FOLLOW_THROUGH``: 1 is the scripted motion, 0 just past the tipping
-    angle or the travel threshold), as a person stops pushing once the
-    object looks done.
+    (``FOLLOW_THROUGH``: 1 is the scripted motion, 0 the least that still
+    succeeds: just past the tipping angle or the travel threshold; for
+    Close's flick, the earliest stop from which the lid's momentum still
+    carries it over), as a person stops pushing once the object looks done.
     """
     if not 0.0 <= follow_through <= 1.0:
         raise ValueError(f"follow_through: expected a fraction in [0, 1], got {follow_through!r}")
