@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from drake_skill.cli.main import main
-from drake_skill.learning.loop import ARTIFACTS
+from drake_skill.learning.loop import ARTIFACTS, EXPLORATION_SCALES
 from drake_skill.skill import Skill
 
 from learning_support import shared_skill
@@ -29,6 +29,9 @@ def test_learn_writes_every_artifact(learned, capsys):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["method"] == "pi2-es-cov" and summary["reward"] == "dense" and summary["weighting"] == "thesis"
     assert [c["episode"] for c in summary["curve"]] == [0, 1]
+    # No --exploration-scale: the skill's default, saved as the number used.
+    name = Skill.load(shared["skill_dir"]).name
+    assert json.loads((out / "config.json").read_text())["learn"]["exploration_scale"] == EXPLORATION_SCALES[name]
     assert summary["n_rollouts"] == 2 and 0.0 <= summary["held_out_after"] <= 1.0
     records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
     assert [r["type"] for r in records] == ["held_out", "greedy", "episode", "rollout", "rollout", "greedy",
@@ -83,6 +86,7 @@ def test_evaluate_explore_reports_the_spread_of_exploratory_returns(learned, cap
     report = json.loads(capsys.readouterr().out)
     assert report == json.loads(out.read_text())
     assert report["seeds"] == [900000, 900001] and len(report["returns"]) == 2
+    assert report["exploration_scale"] == EXPLORATION_SCALES[Skill.load(shared["skill_dir"]).name]
     spread = report["return_spread"]
     assert spread["min"] == min(report["returns"]) and spread["max"] == max(report["returns"])
     assert spread["min"] <= spread["median"] <= spread["max"] and spread["std"] >= 0.0

@@ -9,7 +9,8 @@ once (``OUT/SKILL/initial_skill``; every run starts from the same action and
 goal model, as in the thesis' simulation study, docs/method.md section 6).
 Then ``--seeds`` learning runs (seeds 0, 1, ...) with the defaults of
 ``drake-skill learn``: PI^2-ES-Cov, dense reward, thesis weighting, 5
-episodes x 6 rollouts, the object frame from the segmenter, and greedy
+episodes x 6 rollouts, the skill's exploration scale (Open 0.1, Close 1 x
+Sigma_0, docs/method.md section 5), the object frame from the segmenter, and greedy
 success on the 10 held-out object poses before and after learning (the
 Meshcat replays are off: they change no number). ``before`` / ``after`` are
 the means over the runs of that held-out success.
@@ -85,6 +86,7 @@ def main(argv=None) -> int:
     import numpy as np
 
     from drake_skill.fileio import atomic_write_json
+    from drake_skill.learning.loop import default_exploration_scale
 
     log = io.StringIO() if args.json else sys.stdout
     report = {}
@@ -99,7 +101,8 @@ def main(argv=None) -> int:
                          "greedy_success": s["greedy_success"], "failures": s["failures"],
                          "wall_s": s.get("wall_s")})
         report[skill] = {"before": float(np.mean([r["before"] for r in runs])),
-                         "after": float(np.mean([r["after"] for r in runs])), "runs": runs}
+                         "after": float(np.mean([r["after"] for r in runs])),
+                         "exploration_scale": default_exploration_scale(skill), "runs": runs}
     report["required"] = {"before_max": BEFORE_MAX, "after_min": AFTER_MIN}
     report["settings"] = {"method": "pi2-es-cov", "reward": "dense", "weighting": args.weighting,
                           "episodes": args.episodes, "rollouts": args.rollouts, "held_out_poses": args.held_out,

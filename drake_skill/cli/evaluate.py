@@ -36,7 +36,7 @@ HELP = "greedy success of a skill over held-out object poses (table + JSON)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from drake_skill.learning.loop import DEFAULT_EXPLORATION_SCALE, HELD_OUT_SEED0
+    from drake_skill.learning.loop import EXPLORATION_SCALES, HELD_OUT_SEED0
 
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -52,9 +52,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--explore", type=int, default=0, metavar="N",
                         help="instead: N exploratory rollouts sampled from the skill's Sigma_0 (policy "
                              "search's first episode); reports the spread of their learned returns")
-    parser.add_argument("--exploration-scale", type=float, default=DEFAULT_EXPLORATION_SCALE, metavar="S",
-                        help=f"with --explore: sample from S x Sigma_0 (default {DEFAULT_EXPLORATION_SCALE:g}, "
-                             "as drake-skill learn)")
+    scales = ", ".join(f"{k} {v:g}" for k, v in EXPLORATION_SCALES.items())
+    parser.add_argument("--exploration-scale", type=float, default=None, metavar="S",
+                        help=f"with --explore: sample from S x Sigma_0 (default: the skill's, as "
+                             f"drake-skill learn: {scales})")
     parser.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE", help="scenario YAML (StationConfig; default: the skill's scenario)")
     parser.add_argument("--out", type=Path, default=None, help="JSON report (default SKILL/evaluation.json)")
     parser.add_argument("--json", action="store_true", help="print the JSON report instead of the table")

@@ -67,8 +67,18 @@ ARTIFACTS = ("config.json", "results.jsonl", "summary.json", "learning_curve.png
 
 REWARDS = ("dense", "sparse")
 
-#: sigma_0 (thesis Eq. 5.3) of ``LearnConfig.exploration_scale`` and ``explore_skill``.
-DEFAULT_EXPLORATION_SCALE = 0.1
+#: sigma_0 (thesis Eq. 5.3) per skill: the default of ``LearnConfig.exploration_scale``
+#: and ``explore_skill``. Open explores at a tenth of Sigma_0, Close at the
+#: thesis' 1 (docs/method.md section 5, "Initial exploration scale").
+EXPLORATION_SCALES = {"open": 0.1, "close": 1.0, "draw": 0.1}
+
+
+def default_exploration_scale(skill: str) -> float:
+    """sigma_0 of thesis Eq. 5.3 for ``skill`` (``EXPLORATION_SCALES``)."""
+    if skill not in EXPLORATION_SCALES:
+        raise ValueError(f"skill {skill!r}: no default exploration scale; expected one of "
+                         f"{', '.join(EXPLORATION_SCALES)} or give exploration_scale")
+    return EXPLORATION_SCALES[skill]
 
 
 def _valid_exploration_scale(value) -> bool:
@@ -91,8 +101,9 @@ class LearnConfig:
       learning (0: off); held_out_seed0: their first seed.
     exploration_scale: sigma_0 of thesis Eq. 5.3: the first episode samples
       ``w_b ~ N(w_b, exploration_scale * Sigma_b^0)`` (every method starts
-      from that covariance; the covariance floor follows it). The thesis
-      sets it to 1; the default is smaller (docs/method.md section 5).
+      from that covariance; the covariance floor follows it). None: the
+      skill's (``EXPLORATION_SCALES``; ``learn`` saves the value it used).
+      The thesis sets it to 1 (docs/method.md section 5).
     """
 
     method: str = "pi2-es-cov"
@@ -103,7 +114,7 @@ class LearnConfig:
     seed: int = 0
     held_out: int = 10
     held_out_seed0: int = HELD_OUT_SEED0
-    exploration_scale: float = DEFAULT_EXPLORATION_SCALE
+    exploration_scale: float | None = None
 
     def validate(self) -> "LearnConfig":
         def bad(field, value, expected):
@@ -124,7 +135,7 @@ class LearnConfig:
             bad("rollouts", self.rollouts, f"at least {min_rollouts} per episode for {self.method}")
         if int(self.held_out) < 0:
             bad("held_out", self.held_out, "0 (off) or a number of poses")
-        if not _valid_exploration_scale(self.exploration_scale):
+        if self.exploration_scale is not None and not _valid_exploration_scale(self.exploration_scale):
             bad("exploration_scale", self.exploration_scale, "a factor in (0, 100] on Sigma_b^0")
         return self
 
@@ -321,6 +332,8 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
     out_dir = Path(out_dir)
     skill_dir = Path(skill_dir)
     skill = Skill.load(skill_dir)
+    if config.exploration_scale is None:
+        config = dc.replace(config, exploration_scale=default_exploration_scale(skill.name))
     station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
     rollout_config = (rollout_config or RolloutConfig()).validate()
     run_config = {"learn": dc.asdict(config), "skill": skill.name, "skill_dir": str(skill_dir.resolve()),
@@ -567,11 +580,12 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
 
 def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0, station_config=None,
                   rollout_config=None, workers: int = 1, ray_address: str | None = None,
-                  progress: bool = True, exploration_scale: float = DEFAULT_EXPLORATION_SCALE) -> dict[str, Any]:
+                  progress: bool = True, exploration_scale: float | None = None) -> dict[str, Any]:
     """Exploratory rollouts of a fitted skill: what the first episode of policy search sees.
 
     Draws ``rollouts`` weight samples ``W ~ N(W_0, exploration_scale * Sigma_b^0)`` per basis
-    (PI^2-ES-Cov's first ``ask``, seeded by ``seed0``) and executes each on
+    (PI^2-ES-Cov's first ``ask``, seeded by ``seed0``; ``exploration_scale``
+    None: the skill's, as ``learn``) and executes each on
     the pose of seed ``seed0 + i``. Returns a JSON-able report: the returns
     (learned dense reward; 0 for a failed rollout), their spread (min,
     median, max, standard deviation), ground-truth successes, final object
@@ -587,6 +601,8 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     skill = Skill.load(skill_dir)
     station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
     rollout_config = (rollout_config or RolloutConfig()).validate()
+    if exploration_scale is None:
+        exploration_scale = default_exploration_scale(skill.name)
     if not _valid_exploration_scale(exploration_scale):
         raise ValueError(f"exploration_scale: expected a factor in (0, 100] on Sigma_b^0, got {exploration_scale!r}")
     samples = make_policy_search("pi2-es-cov", skill.initial_weights, exploration_scale * skill.sigma0,
