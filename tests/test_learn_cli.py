@@ -34,7 +34,8 @@ def test_learn_writes_every_artifact(learned, capsys):
     assert json.loads((out / "config.json").read_text())["learn"]["exploration_scale"] == EXPLORATION_SCALES[name]
     assert summary["n_rollouts"] == 2 and 0.0 <= summary["held_out_after"] <= 1.0
     records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
-    assert [r["type"] for r in records] == ["held_out", "greedy", "episode", "rollout", "rollout", "greedy",
+    # The greedy execution before learning waits for the one after the update (GREEDY_BATCH = 2).
+    assert [r["type"] for r in records] == ["held_out", "rollout", "rollout", "greedy", "episode", "greedy",
                                            "episode", "held_out"]
     assert [r["episode"] for r in records if r["type"] == "episode"] == [0, 1]
     for r in records:

@@ -73,6 +73,9 @@ def test_resume_after_an_interruption_reproduces_the_uninterrupted_run(tmp_path_
     assert not part.complete and part.search.episode == 1
     state = json.loads((tmp_path / "part" / "checkpoint" / "state.json").read_text())
     assert state["episode"] == 1 and not (tmp_path / "part" / "summary.json").exists()
+    # The greedy executions before and after the first update wait, with their means, to run as a pair.
+    assert [p["episode"] for p in state["pending"]] == [0, 1] and state["curve"] == []
+    np.testing.assert_array_equal(state["pending"][1]["mean"], part.search.mean)
     with pytest.raises(FileExistsError, match="--resume"):
         learn(shared["skill_dir"], tmp_path / "part", config, **kwargs)
     with pytest.raises(ValueError, match="learn"):           # other settings: refused

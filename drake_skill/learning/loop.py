@@ -13,6 +13,9 @@ docs/method.md section 5, docs/architecture.md "The outer loop"::
         checkpoint
     held-out greedy success of the final mean            (after learning)
 
+The greedy executions run two at a time beside the next episode's rollouts
+(:data:`GREEDY_BATCH`), which changes no number, only when they run.
+
 Returns (docs/method.md sections 4-5): ``reward="dense"`` uses the POMRP
 return R(G) (thesis Eq. 4.5) for the black-box methods and the filtered
 per-step rewards for :data:`~drake_skill.learning.policy_search.PER_STEP_METHODS`;
@@ -84,7 +87,15 @@ def default_exploration_scale(skill: str) -> float:
 def _valid_exploration_scale(value) -> bool:
     """An exploration scale is a finite factor in (0, 100] on Sigma_b^0."""
     return math.isfinite(value) and 0 < value <= 100
-_CHECKPOINT_FORMAT = 1
+_CHECKPOINT_FORMAT = 2
+
+#: Greedy executions wait until this many are due and then run beside the next
+#: episode's rollouts (all that are left after the last update). One greedy
+#: execution beside an even number of rollouts would leave one of two workers
+#: idle for a whole rollout every episode; two fill that slot. A constant, not
+#: the number of workers, so that the records come out in the same order on
+#: any pool.
+GREEDY_BATCH = 2
 
 
 @dc.dataclass
@@ -355,6 +366,8 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
         search = policy_search_from_state(load_npz(checkpoint / "search.npz"))
         records, curve = state["records"], state["curve"]
         held_out_before, pending = state.get("held_out_before"), state.get("pending")
+        if state.get("format", 1) == 1:         # one greedy execution pending, of the current mean
+            pending = [] if pending is None else [{**pending, "mean": search.mean.tolist()}]
         _print(f"resuming {out_dir} after episode {search.episode} of {config.episodes}", file=stream)
     else:
         if (checkpoint / "state.json").exists() and not force:
@@ -367,7 +380,7 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
         atomic_write_json(out_dir / "config.json", run_config)
         search = make_policy_search(config.method, skill.initial_weights,
                                     config.exploration_scale * skill.sigma0, **config.search_options())
-        records, curve, held_out_before, pending = [], [], None, None
+        records, curve, held_out_before, pending = [], [], None, []
     per_step = config.method in PER_STEP_METHODS
     weighting = search.state_dict().get("option_weighting")   # the method's default when not given
     weighting = None if weighting is None else str(weighting)
@@ -430,8 +443,9 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
         if not resume:
             held_out_before = held_out("before")
             # Episode 0: the greedy execution before learning is still to run.
-            pending = {"episode": 0, "mean_return": None, "best_return": None,
-                       "exploration": exploration_size(search), "failures": {}}
+            pending = [{"episode": 0, "mean_return": None, "best_return": None,
+                        "exploration": exploration_size(search), "failures": {},
+                        "mean": search.mean.tolist()}]
             save_checkpoint()
             _print(f"{skill.name}: {config.method}, {config.reward} reward, weighting {weighting or '-'}, "
                    f"{config.episodes} episodes x {config.rollouts} rollouts, {pool.n_workers} worker(s)",
@@ -440,22 +454,24 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
         for row in curve:
             _print(_table_row(row), file=stream)
         ran = 0
-        # Each batch: the greedy execution of the last update (pending) together
-        # with the next episode's rollouts; both need only that update, so the
-        # workers run them side by side. A checkpoint follows every update.
-        while pending is not None or search.episode < config.episodes:
+        # Each batch: an episode's rollouts, and beside them the greedy
+        # executions of earlier updates once GREEDY_BATCH of them are due
+        # (pending; each needs only its update's mean, kept with it). A
+        # checkpoint follows every batch.
+        while pending or search.episode < config.episodes:
             rollouts_now = search.episode < config.episodes
             if rollouts_now and stop_after is not None and ran >= stop_after:
                 return LearnOutcome({"interrupted_after_episode": search.episode}, out_dir, False, search)
-            tasks, greedy_result = [], None
-            if pending is not None:
-                g_episode = pending["episode"]
-                g_seed = pose_seed(config.seed, g_episode, None)
-                path = greedy_path(g_episode)
+            due = pending if (not rollouts_now or len(pending) >= GREEDY_BATCH) else []
+            tasks, greedy_results = [], []
+            for p in due:
+                g_seed, path = pose_seed(config.seed, p["episode"], None), greedy_path(p["episode"])
                 if viewer is not None and (live or path is not None):
-                    greedy_result = replayer.run(viewer, search.mean, g_seed, path)
+                    greedy_results.append(replayer.run(viewer, np.asarray(p["mean"]), g_seed, path))
                 else:
-                    tasks.append((search.mean, g_seed))
+                    greedy_results.append(None)
+                    tasks.append((np.asarray(p["mean"]), g_seed))
+            n_pooled = len(tasks)
             if rollouts_now:
                 episode = search.episode + 1
                 exploration = exploration_size(search)
@@ -470,17 +486,17 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
                     results = pool.map(tasks, lambda i, r: b.update(1))
                 finally:
                     b.close()
-            if pending is not None:
-                if greedy_result is None:
-                    greedy_result, results = results[0], results[1:]
-                g = {"type": "greedy", "episode": pending["episode"], **greedy_result.summary()}
+            pooled, results = iter(results[:n_pooled]), results[n_pooled:]
+            for p, greedy_result in zip(due, greedy_results):
+                greedy_result = greedy_result if greedy_result is not None else next(pooled)
+                g = {"type": "greedy", "episode": p["episode"], **greedy_result.summary()}
                 records.append(g)
-                row = {**pending, "greedy_success": g["success"], "greedy_return": g["dense_return"],
-                       "greedy_verdict": g["verdict"]}
+                row = {**{k: v for k, v in p.items() if k != "mean"}, "greedy_success": g["success"],
+                       "greedy_return": g["dense_return"], "greedy_verdict": g["verdict"]}
                 curve.append(row)
                 records.append({"type": "episode", **row})
                 _print(_table_row(row), file=stream)
-                pending = None
+            pending = pending[len(due):]
             if rollouts_now:
                 values = episode_rewards(results, config.reward, per_step)
                 search.tell(samples, values)
@@ -488,11 +504,12 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
                 for c, r in enumerate(results):
                     records.append({"type": "rollout", "episode": episode, "index": c,
                                     "reward": float(returns[c]), **r.summary()})
-                pending = {"episode": episode, "mean_return": float(np.mean(returns)),
-                           "best_return": float(np.max(returns)), "exploration": exploration,
-                           "failures": dict(Counter(r.reason for r in results if r.failed)),
-                           "rollout_successes": int(sum(r.success for r in results)),
-                           "ik_warnings": int(sum(r.ik_warnings for r in results))}
+                pending.append({"episode": episode, "mean_return": float(np.mean(returns)),
+                                "best_return": float(np.max(returns)), "exploration": exploration,
+                                "failures": dict(Counter(r.reason for r in results if r.failed)),
+                                "rollout_successes": int(sum(r.success for r in results)),
+                                "ik_warnings": int(sum(r.ik_warnings for r in results)),
+                                "mean": search.mean.tolist()})
                 ran += 1
             save_checkpoint()
 
