@@ -86,7 +86,6 @@ def main(argv=None) -> int:
     import numpy as np
 
     from drake_skill.fileio import atomic_write_json
-    from drake_skill.learning.loop import default_exploration_scale
 
     log = io.StringIO() if args.json else sys.stdout
     report = {}
@@ -97,12 +96,14 @@ def main(argv=None) -> int:
             if not args.json:
                 print(f"--- {skill}, seed {seed}")
             s = one_run(skill_dir, args.out / skill / f"seed{seed}", seed, args, log)
+            used = json.loads((args.out / skill / f"seed{seed}" / "config.json").read_text())["learn"]
             runs.append({"seed": seed, "before": s["held_out_before"], "after": s["held_out_after"],
+                         "exploration_scale": used["exploration_scale"],
                          "greedy_success": s["greedy_success"], "failures": s["failures"],
                          "wall_s": s.get("wall_s")})
         report[skill] = {"before": float(np.mean([r["before"] for r in runs])),
                          "after": float(np.mean([r["after"] for r in runs])),
-                         "exploration_scale": default_exploration_scale(skill), "runs": runs}
+                         "exploration_scale": runs[0]["exploration_scale"], "runs": runs}
     report["required"] = {"before_max": BEFORE_MAX, "after_min": AFTER_MIN}
     report["settings"] = {"method": "pi2-es-cov", "reward": "dense", "weighting": args.weighting,
                           "episodes": args.episodes, "rollouts": args.rollouts, "held_out_poses": args.held_out,

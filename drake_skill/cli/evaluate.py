@@ -36,7 +36,7 @@ HELP = "greedy success of a skill over held-out object poses (table + JSON)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from drake_skill.learning.loop import EXPLORATION_SCALES, HELD_OUT_SEED0
+    from drake_skill.learning.loop import HELD_OUT_SEED0, exploration_scales_text
 
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -52,10 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--explore", type=int, default=0, metavar="N",
                         help="instead: N exploratory rollouts sampled from the skill's Sigma_0 (policy "
                              "search's first episode); reports the spread of their learned returns")
-    scales = ", ".join(f"{k} {v:g}" for k, v in EXPLORATION_SCALES.items())
     parser.add_argument("--exploration-scale", type=float, default=None, metavar="S",
                         help=f"with --explore: sample from S x Sigma_0 (default: the skill's, as "
-                             f"drake-skill learn: {scales})")
+                             f"drake-skill learn: {exploration_scales_text()})")
     parser.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE", help="scenario YAML (StationConfig; default: the skill's scenario)")
     parser.add_argument("--out", type=Path, default=None, help="JSON report (default SKILL/evaluation.json)")
     parser.add_argument("--json", action="store_true", help="print the JSON report instead of the table")

@@ -44,7 +44,7 @@ _METHODS = ("power", "pi2", "pi2-cov", "pi2-es", "pi2-es-cov", "cma-es")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from drake_skill.learning.loop import EXPLORATION_SCALES
+    from drake_skill.learning.loop import exploration_scales_text
 
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -63,11 +63,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(exp(h (R - min)/(max - min))); default: the method's")
     search.add_argument("--episodes", type=int, default=5, help="updates (default 5)")
     search.add_argument("--rollouts", type=int, default=6, help="rollouts per update (default 6)")
-    scales = ", ".join(f"{k} {v:g}" for k, v in EXPLORATION_SCALES.items())
     search.add_argument("--exploration-scale", type=float, default=None, metavar="S",
                         help="sigma_0 of thesis Eq. 5.3: the first episode explores with S x Sigma_0, the "
-                             f"demonstrations' weight covariance (default: the skill's, {scales}; "
-                             "the thesis: 1)")
+                             "demonstrations' weight covariance (default: the skill's, "
+                             f"{exploration_scales_text()}; the thesis: 1)")
     search.add_argument("--seed", type=int, default=0, help="policy search and object-pose seed (default 0)")
     search.add_argument("--held-out", type=int, default=10,
                         help="held-out object poses for greedy success before and after (0: off; default 10)")

@@ -84,6 +84,11 @@ def default_exploration_scale(skill: str) -> float:
     return EXPLORATION_SCALES[skill]
 
 
+def exploration_scales_text() -> str:
+    """``EXPLORATION_SCALES`` for help texts: "open 0.1, close 1, draw 0.1"."""
+    return ", ".join(f"{skill} {scale:g}" for skill, scale in EXPLORATION_SCALES.items())
+
+
 def _valid_exploration_scale(value) -> bool:
     """An exploration scale is a finite factor in (0, 100] on Sigma_b^0."""
     return math.isfinite(value) and 0 < value <= 100
