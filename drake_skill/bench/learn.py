@@ -3,7 +3,7 @@
 ``drake-skill bench learn [--json]`` / ``python tools/bench_learn.py [--json]``.
 
 The default learning run of ``drake-skill learn`` (Open, PI^2-ES-Cov, dense
-reward, 5 episodes x 6 rollouts = 36 rollouts, and 6 greedy executions; the
+reward, 5 episodes x 6 rollouts and 6 greedy executions, 36 executions in all; the
 held-out evaluation off, and the Meshcat replays unless ``--replay``), run twice from the same
 fitted skill and seed: on 1 worker (the rollouts in this process) and on 2
 worker processes. The wall time of each covers the whole run, worker start-up

@@ -232,6 +232,9 @@ class Station(Diagram):
                                            MeshcatVisualizerParams(role=Role.kIllustration))
         builder.BuildInto(self)
         self.set_name("station")
+        # Looked up once: the reflex monitor reads them after every plant step.
+        self._contact_results_port = self.GetOutputPort("contact_results")
+        self._external_torque_port = self.GetOutputPort("external_torque")
 
     def _set_contact_properties(self) -> None:
         """Replaces every collision geometry's proximity properties with its surface's."""
@@ -260,14 +263,14 @@ class Station(Diagram):
         torques of joints 1..7 [N m]) at the state in ``context`` (a root context
         containing this station)."""
         ctx = self.GetMyContextFromRoot(context)
-        results = self.GetOutputPort("contact_results").Eval(ctx)
+        results = self._contact_results_port.Eval(ctx)
         force = 0.0
         robot = self.robot_bodies
         for i in range(results.num_point_pair_contacts()):
             info = results.point_pair_contact_info(i)
             if (int(info.bodyA_index()) in robot) != (int(info.bodyB_index()) in robot):
                 force += float(np.linalg.norm(info.contact_force()))
-        tau = np.asarray(self.GetOutputPort("external_torque").Eval(ctx), dtype=float)
+        tau = self._external_torque_port.Eval(ctx)
         return force, tau
 
     # ------------------------------------------------------------------ camera

@@ -198,24 +198,33 @@ class StationRecorder:
         peak = [0.0]
         filt = self._filtered          # [force, tau (7), time of the last update]
 
+        # Called after every plant step (1 kHz) in Python: scalars stay Python
+        # floats and the torque filter one numpy array (filt_tau, a view).
+        filter_time, force_max, enabled = reflex.filter_time, reflex.contact_force_max, reflex.enabled
+        filt_tau = filt[1:8]
+        succeeded = EventStatus.Succeeded()
+
         def monitor(root_context):
             force, tau = station.robot_scene_contact(root_context)
             now = root_context.get_time()
             # The robot's reflex acts on its filtered estimate of the external
             # wrench and torques: first-order low-pass, time constant filter_time.
             dt = max(now - filt[8], 0.0)
-            alpha = 1.0 if reflex.filter_time <= 0 else 1.0 - math.exp(-dt / reflex.filter_time)
-            filt[0] += alpha * (force - filt[0])
-            filt[1:8] += alpha * (tau - filt[1:8])
+            alpha = 1.0 if filter_time <= 0 else 1.0 - math.exp(-dt / filter_time)
+            f = float(filt[0])
+            f += alpha * (force - f)
+            filt[0] = f
+            np.add(filt_tau, alpha * (tau - filt_tau), out=filt_tau)
             filt[8] = now
-            peak[0] = max(peak[0], filt[0])
-            if reflex.enabled:
-                over = np.flatnonzero(np.abs(filt[1:8]) > tau_max)
-                if filt[0] > reflex.contact_force_max or over.size:
-                    cause = "force" if filt[0] > reflex.contact_force_max else f"torque joint {over[0] + 1}"
-                    tripped.append(ReflexError(now, filt[0], filt[1:8], cause))
+            if f > peak[0]:
+                peak[0] = f
+            if enabled:
+                over = np.abs(filt_tau) > tau_max
+                if f > force_max or over.any():
+                    cause = "force" if f > force_max else f"torque joint {int(np.argmax(over)) + 1}"
+                    tripped.append(ReflexError(now, f, filt_tau, cause))
                     return EventStatus.ReachedTermination(station, "collision reflex")
-            return EventStatus.Succeeded()
+            return succeeded
 
         self.simulator.set_monitor(monitor)
         try:
