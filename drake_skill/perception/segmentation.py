@@ -282,10 +282,10 @@ def fit_table_plane(xyz, config: SegmentationConfig, image_shape, seed: int = 0)
     """Fits the table plane to an organised cloud; returns ``[a, b, c, d]`` (see module docstring).
 
     Uses every ``plane_stride``-th row and column of the finite points inside
-    the workspace crop; RANSAC (open3d, seeded with ``seed``) then a
-    least-squares refit on the inliers. Raises ValueError when there are
-    fewer than 100 such points or the plane is tilted more than
-    ``plane_max_tilt_deg`` from horizontal.
+    the workspace crop; RANSAC (open3d, seeded with ``seed``, all
+    ``plane_ransac_iterations`` run) then a least-squares refit on the
+    inliers. Raises ValueError when there are fewer than 100 such points or
+    the plane is tilted more than ``plane_max_tilt_deg`` from horizontal.
     """
     import open3d as o3d
 
@@ -303,7 +303,14 @@ def fit_table_plane(xyz, config: SegmentationConfig, image_shape, seed: int = 0)
                          "cannot fit the table plane (need 100)")
     o3d.utility.random.seed(int(seed))
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(sub))
-    _, inliers = cloud.segment_plane(config.plane_ransac_distance, 3, config.plane_ransac_iterations)
+    # probability=1 runs every iteration. open3d evaluates the iterations on
+    # OpenMP threads and, by default, stops early once its confidence bound is
+    # met; how many iterations ran before that check then depends on thread
+    # timing, and on a loaded machine the same seed gave two different planes
+    # within 200 calls. With all iterations run, the set of sampled triples is
+    # fixed by the seed and the best of them (most inliers, then least RMSE)
+    # does not depend on the order in which threads finish.
+    _, inliers = cloud.segment_plane(config.plane_ransac_distance, 3, config.plane_ransac_iterations, 1.0)
     pts = sub[np.asarray(inliers)]
     centre = pts.mean(axis=0)
     normal = np.linalg.svd(pts - centre, full_matrices=False)[2][2]
