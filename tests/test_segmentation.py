@@ -55,6 +55,14 @@ def _yaw(X):
     return math.atan2(X[1, 0], X[0, 0])
 
 
+def _scenario_segmentation(skill) -> SegmentationConfig:
+    """The segmentation settings the skill's scenario gives the segmenter (Draw's footprint band)."""
+    from drake_skill.perception.systems import segmenter_config_for_station
+    from drake_skill.station.config import scenario_for_skill
+
+    return segmenter_config_for_station(scenario_for_skill(skill)).segmentation
+
+
 def _check_frame(result, truth, X, skill, seed, what=""):
     """IoU against the label image and X_WO against the truth: measured on the object
     camera (seeds 0-5) IoU 0.987-0.992, position 1.3-1.6 mm, yaw <= 0.11 degrees;
@@ -72,7 +80,7 @@ def _check_frame(result, truth, X, skill, seed, what=""):
 @pytest.mark.parametrize("skill", ["open", "close", "draw"])
 def test_station_segmentation_matches_labels_and_pose(station_frames, skill):
     """Box lid closed (open), lid open at 1.9 rad (close), drawer (draw); several seeds."""
-    config = SegmentationConfig()
+    config = _scenario_segmentation(skill)
     for seed in SEEDS:
         xyz, rgb, truth, X, shape, _ = station_frames[skill, seed]
         plane = fit_table_plane(xyz, config, shape)
@@ -94,7 +102,7 @@ def test_station_segmentation_matches_labels_and_pose(station_frames, skill):
 def test_a_table_of_the_object_colour_is_removed_by_the_plane(station_frames, skill):
     """The station's frames with the table painted the object's blue: the colour mask keeps
     it, so only the table-plane removal separates the object from the table."""
-    config = SegmentationConfig()
+    config = _scenario_segmentation(skill)
     for seed in SEEDS:
         xyz, rgb, truth, X, shape, table = station_frames[skill, seed]
         painted = rgb.copy()

@@ -159,6 +159,8 @@ def test_object_state_port_reports_lid_angle():
     ("object: {randomize_yaw: -0.1}", "object.randomize_yaw"),
     ("object: {x: 1.5}", "object.x/object.y"),
     ("object: {joint_friction: -1.0}", "object.joint_friction"),
+    ("object: {footprint_heights: [0.2, 0.1]}", "object.footprint_heights"),
+    ("object: {footprint_heights: [0.1]}", "object.footprint_heights"),
     ("controller: {kp: [-600, 600, 600, 600, 250, 150, 50]}", r"controller.kp[0]"),
     ("controller: {ee_speed_max: -0.1}", "controller.ee_speed_max"),
     ("controller: {velocity_scale: .nan}", "controller.velocity_scale"),

@@ -206,7 +206,8 @@ class ObjectSegmenterConfig:
 
 def segmenter_config_for_station(station_config, window=None) -> ObjectSegmenterConfig:
     """The segmenter's configuration matching a ``StationConfig``: image size,
-    camera rate, and the object's nominal pose (default X_WO, nominal yaw).
+    camera rate, the object's nominal pose (default X_WO, nominal yaw) and its
+    footprint band (``object.footprint_heights``, where the scenario gives one).
 
     The image size is the full frame's, or that of ``window`` (a
     :class:`~drake_skill.station.camera.CropWindow`, the station's
@@ -217,6 +218,8 @@ def segmenter_config_for_station(station_config, window=None) -> ObjectSegmenter
                                    plane_image_width=cam.width, plane_image_height=cam.height,
                                    default_pose=[obj.x, obj.y, obj.yaw])
     config.segmentation.nominal_yaw = obj.yaw
+    if obj.footprint_heights:
+        config.segmentation.footprint_min_height, config.segmentation.footprint_max_height = obj.footprint_heights
     return config.validate()
 
 

@@ -55,6 +55,12 @@ class ObjectConfig:
       regularised Coulomb law tau = -clamp(d v, -tau_c, tau_c).
     joint_friction_gain: the regularisation's slope d [N m s/rad or N s/m];
       |v| above tau_c / d slides at the full friction.
+    footprint_heights: ``[low, high]`` heights above the table [m] of the
+      points whose outline gives the object's frame (the segmenter's
+      footprint band, docs/method.md section 3): a horizontal slice of the
+      object whose outline is that of its base and that neither the moving
+      part nor anything standing proud of the base crosses. Empty: the
+      segmenter's default band (the box's base, below its lid).
     """
 
     kind: str = "box"
@@ -68,6 +74,7 @@ class ObjectConfig:
     joint_damping: float = 0.005
     joint_friction: float = 0.01
     joint_friction_gain: float = 1.0
+    footprint_heights: list[float] = dc.field(default_factory=list)
 
 
 @dc.dataclass
@@ -289,6 +296,11 @@ def validate_station_config(config: StationConfig) -> StationConfig:
     _number("object.joint_damping", obj.joint_damping, 0.0, 100.0, what="a damping")
     _number("object.joint_friction", obj.joint_friction, 0.0, 100.0, what="a friction force/torque")
     _number("object.joint_friction_gain", obj.joint_friction_gain, 0.0, 1e4, lo_open=True, what="a gain")
+    if obj.footprint_heights:
+        band = obj.footprint_heights
+        if len(band) != 2 or not all(math.isfinite(v) for v in band) or not 0.0 <= band[0] < band[1]:
+            _bad("object.footprint_heights", band,
+                 "[] (the segmenter's default) or [low, high] heights above the table, 0 <= low < high [m]")
 
     for f in dc.fields(ContactConfig):
         s = getattr(config.contact, f.name)
