@@ -24,7 +24,9 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.lcm import DrakeLcm
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
+from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.lcm import LcmSubscriberSystem, SerializerInterface
 
 from drake_skill.action.dmp import DmpConfig, fit_dmp
 from drake_skill.action.quaternion import make_quaternions_continuous
@@ -202,12 +204,43 @@ def test_a_learning_run_on_the_simulated_robot(tmp_path, tmp_path_factory):
 
 
 # --------------------------------------------------------------------------- safety
-def _harness(hardware_config, lcm):
+class _Recorder(SerializerInterface):
+    """Every ``lcm_type`` message an LcmSubscriberSystem receives, decoded, in order.
+
+    pydrake's ``DrakeLcm.Subscribe`` makes the handler's ``bytes`` without the
+    GIL; pumped by an LcmInterfaceSystem inside ``AdvanceTo`` (which releases
+    the GIL) while the SimRobot's thread runs Python, that corrupted the heap
+    (a segmentation fault in about one run in four). An LcmSubscriberSystem
+    keeps the bytes in C++ and calls ``Deserialize`` with the GIL held.
+    """
+
+    def __init__(self, lcm_type):
+        SerializerInterface.__init__(self)
+        self.lcm_type, self.messages = lcm_type, []
+
+    def CreateDefaultValue(self):
+        return AbstractValue.Make(self.lcm_type())
+
+    def Deserialize(self, buffer, abstract_value):
+        message = self.lcm_type.decode(bytes(buffer))
+        self.messages.append(message)
+        abstract_value.set_value(message)
+
+    def Serialize(self, abstract_value):
+        return abstract_value.get_value().encode()
+
+
+def _harness(hardware_config, lcm, record_channel=None):
+    """The hardware station driven by a PoseTrajectorySource; with ``record_channel``,
+    also a subscriber that records every lcmt_panda_command on it (``station.recorded``)."""
     builder = DiagramBuilder()
     station = builder.AddSystem(build_hardware_station(hardware_config, lcm=lcm))
     source = builder.AddSystem(PoseTrajectorySource())
     builder.Connect(source.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
     builder.Connect(source.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))
+    if record_channel is not None:
+        station.recorded = _Recorder(lcmt_panda_command)
+        builder.AddSystem(LcmSubscriberSystem(record_channel, station.recorded, lcm))
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     simulator = Simulator(diagram, context)
@@ -219,9 +252,8 @@ def test_jump_is_rate_limited_clipped_and_stale_status_stops_the_station():
     hardware_config = _hardware_config(_scenario("draw"))
     lcm = DrakeLcm("memq://")
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
-    station, source, context, simulator = _harness(hardware_config, lcm)
-    commands = []
-    lcm.Subscribe(hardware_config.command_channel, lambda data: commands.append(lcmt_panda_command.decode(data)))
+    station, source, context, simulator = _harness(hardware_config, lcm, hardware_config.command_channel)
+    commands = station.recorded.messages
     y_max = hardware_config.workspace.upper[1]
     robot.start()
     try:
