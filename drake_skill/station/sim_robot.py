@@ -190,7 +190,12 @@ class SimRobot:
             (``memq://``) DrakeLcm, pass False: one DrakeLcm must be handled
             by one thread, and the hardware station's does it (messages reach
             this diagram's subscribers from that thread; publishing is
-            thread-safe).
+            thread-safe). Do not add a Python handler with
+            ``DrakeLcm.Subscribe`` to that DrakeLcm while this robot runs in
+            its thread: pydrake makes the handler's bytes without holding the
+            GIL, which corrupts the heap when another thread runs Python;
+            an LcmSubscriberSystem (its serializer is called with the GIL)
+            is safe.
         expire_sec: the driver's ``--expire_sec``.
         guide: a skill name: instead of following commands, the arm is moved
             through that skill's scripted, human-like demonstration
