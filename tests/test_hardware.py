@@ -21,10 +21,10 @@ import numpy as np
 import pytest
 from drake import lcmt_panda_command, lcmt_panda_status
 from pydrake.common.eigen_geometry import Quaternion
+from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
-from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.lcm import LcmSubscriberSystem, SerializerInterface
 
@@ -230,17 +230,16 @@ class _Recorder(SerializerInterface):
         return abstract_value.get_value().encode()
 
 
-def _harness(hardware_config, lcm, record_channel=None):
-    """The hardware station driven by a PoseTrajectorySource; with ``record_channel``,
-    also a subscriber that records every lcmt_panda_command on it (``station.recorded``)."""
+def _harness(hardware_config, lcm, recorder=None):
+    """The hardware station driven by a PoseTrajectorySource; with ``recorder`` (a
+    :class:`_Recorder`), also a subscriber that records every command on the wire."""
     builder = DiagramBuilder()
     station = builder.AddSystem(build_hardware_station(hardware_config, lcm=lcm))
     source = builder.AddSystem(PoseTrajectorySource())
     builder.Connect(source.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
     builder.Connect(source.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))
-    if record_channel is not None:
-        station.recorded = _Recorder(lcmt_panda_command)
-        builder.AddSystem(LcmSubscriberSystem(record_channel, station.recorded, lcm))
+    if recorder is not None:
+        builder.AddSystem(LcmSubscriberSystem(hardware_config.command_channel, recorder, lcm))
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     simulator = Simulator(diagram, context)
@@ -252,8 +251,9 @@ def test_jump_is_rate_limited_clipped_and_stale_status_stops_the_station():
     hardware_config = _hardware_config(_scenario("draw"))
     lcm = DrakeLcm("memq://")
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
-    station, source, context, simulator = _harness(hardware_config, lcm, hardware_config.command_channel)
-    commands = station.recorded.messages
+    recorder = _Recorder(lcmt_panda_command)
+    station, source, context, simulator = _harness(hardware_config, lcm, recorder)
+    commands = recorder.messages
     y_max = hardware_config.workspace.upper[1]
     robot.start()
     try:
