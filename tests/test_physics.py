@@ -85,6 +85,66 @@ def test_commanded_joint_accelerations_stay_within_franka_limits_on_a_step(box_s
     assert np.linalg.norm(box_sim.ee_pose().translation() - step.translation()) < 5e-3
 
 
+def _limiter_step_vector_form(x, r, c):
+    """RateLimiter's docstring equations in numpy (the vector form)."""
+    n = len(r)
+    q, v, a_prev, r_prev, r_dot = np.asarray(x).reshape(5, n)
+    r, jh, a_max, v_max = (np.asarray(u, float) for u in (r, c.jh, c.a_max, c.v_max))
+    r_dot = r_dot + c.gain_ref * ((r - r_prev) / c.h - r_dot)
+    a = c.w2 * (r - q) + c.two_w * (r_dot - v)
+    da = a - a_prev
+    jerk = (np.abs(da) / jh).max()
+    if jerk > 1.0:
+        a = a_prev + da / jerk
+    over = (np.abs(a) / a_max).max()
+    if over > 1.0:
+        a = a / over
+    a = np.minimum(np.maximum(a, (-v_max - v) / c.h), (v_max - v) / c.h)
+    v_new = v + a * c.h
+    return np.concatenate([q + v_new * c.h, v_new, a, r, r_dot])
+
+
+def test_limiter_step_gives_the_floats_of_the_vector_form():
+    """limiter_step (Python floats, for speed at 1 kHz) equals the docstring's
+    numpy vector form bit for bit, on states that reach each bound."""
+    from drake_skill.station.controller import RateLimiter, limiter_step
+
+    limiter = RateLimiter(7, 1e-3, 30.0, limits.QD_MAX, limits.QDD_MAX, limits.QDDD_MAX, 0.01)
+    c = limiter._consts
+    rng = np.random.default_rng(0)
+    jh, a_max, v_max = np.asarray(c.jh), limits.QDD_MAX, limits.QD_MAX
+    slope = c.w2 + c.two_w * c.gain_ref / c.h      # a* is affine in r with this slope
+    hits = {"jerk": 0, "accel": 0, "velocity": 0, "free": 0}
+    for k in range(2000):
+        case = list(hits)[k % 4]
+        q, d = rng.uniform(-2, 2, 7), rng.normal(0, 0.1, 7)
+        r_prev = q + rng.normal(0, 1e-3, 7)
+        sign = np.sign(rng.normal(size=7))
+        v = sign * v_max * (1 - 1e-6) if case == "velocity" else rng.uniform(-0.5, 0.5, 7) * v_max
+        # The unbounded acceleration a* and the previous acceleration of each
+        # regime (a jump, a* beyond a_max reached smoothly, a joint at its
+        # speed limit, none), then the reference that gives that a*.
+        target = {"jerk": sign * 0.55 * jh, "accel": sign * a_max * rng.uniform(1.2, 3, 7),
+                  "velocity": sign * rng.uniform(0.1, 1, 7), "free": rng.uniform(-0.5, 0.5, 7) * a_max}[case]
+        a_prev = {"jerk": target - sign * 1.2 * jh * rng.uniform(1, 1.5, 7),
+                  "accel": np.clip(target, -a_max, a_max) * (1 - 1e-9),
+                  "velocity": target, "free": target + 0.5 * jh * rng.uniform(-1, 1, 7)}[case]
+        a0 = c.w2 * (-q) + c.two_w * (d + c.gain_ref * ((-r_prev) / c.h - d) - v)
+        r = (target - a0) / slope
+        x = np.concatenate([q, v, a_prev, r_prev, d])
+        expected = _limiter_step_vector_form(x, r, c)
+        got = np.array(limiter_step(x.tolist(), r.tolist(), c))
+        assert np.array_equal(got, expected), (k, case)
+        a, v_new = expected[14:21], expected[7:14]
+        reached = {"jerk": np.any(np.abs(a - a_prev) >= jh * (1 - 1e-9)) and np.all(np.abs(a) < a_max),
+                   "accel": np.any(np.abs(a) >= a_max * (1 - 1e-9)),
+                   "velocity": np.any(np.abs(v_new) >= v_max * (1 - 1e-12)),
+                   "free": np.all(np.abs(a - a_prev) < jh) and np.all(np.abs(a) < a_max)
+                           and np.all(np.abs(v_new) < v_max)}
+        hits[case] += bool(reached[case])
+    assert min(hits.values()) >= 400, hits     # each regime is reached in most of its 500 cases
+
+
 @pytest.fixture(scope="module")
 def reflex_sim():
     config = _config("open")

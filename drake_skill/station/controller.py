@@ -12,6 +12,8 @@ every command the robot accepts. The same class limits the finger speed.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.inverse_kinematics import (
@@ -53,6 +55,67 @@ def make_control_plant() -> MultibodyPlant:
     return plant
 
 
+class LimiterConstants(NamedTuple):
+    """The per-limiter constants of :func:`limiter_step`: period h [s], w^2, 2 w,
+    h / max(reference_period, h), and per joint j_max h, a_max, v_max."""
+
+    h: float
+    w2: float
+    two_w: float
+    gain_ref: float
+    jh: list
+    a_max: list
+    v_max: list
+
+
+def limiter_step(x: list, r: list, c: LimiterConstants) -> list:
+    """One step of :class:`RateLimiter` (its docstring's equations) on Python floats.
+
+    x: the state [q_c (n), v_c (n), a (n), r_prev (n), r_dot (n)]; r: the
+    (clipped) reference (n). Returns the next state, same layout.
+
+    Every element goes through the same IEEE operations in the same order as
+    the vector form (numpy's elementwise ``+ - * /``, ``abs``, ``max``, and
+    ``np.maximum(a, b)`` = ``a if a >= b else b`` for numbers), so the result
+    is the same floats; written element by element because at 1 kHz and
+    n <= 7 numpy's per-call overhead is most of the cost.
+    """
+    n = len(r)
+    h, w2, two_w, g = c.h, c.w2, c.two_w, c.gain_ref
+    r_dot, a, da = [], [], []
+    jerk = over = 0.0
+    for i in range(n):
+        qi, vi, pi, di = x[i], x[n + i], x[2 * n + i], x[4 * n + i]
+        ri = r[i]
+        di = di + g * ((ri - x[3 * n + i]) / h - di)
+        ai = w2 * (ri - qi) + two_w * (di - vi)
+        r_dot.append(di)
+        a.append(ai)
+        da.append(ai - pi)
+        jerk = max(jerk, abs(ai - pi) / c.jh[i])
+    # Scale, not clip per joint: the commanded joint motion keeps the IK's
+    # direction (near a singularity the IK moves joints in cancelling pairs,
+    # e.g. joints 1 and 3; clipping them differently moves the hand).
+    if jerk > 1.0:
+        a = [x[2 * n + i] + da[i] / jerk for i in range(n)]
+    for i in range(n):
+        over = max(over, abs(a[i]) / c.a_max[i])
+    if over > 1.0:
+        a = [ai / over for ai in a]
+    q_new, v_new = [], []
+    for i in range(n):
+        vi, vm = x[n + i], c.v_max[i]
+        lo, hi = (-vm - vi) / h, (vm - vi) / h
+        ai = a[i]
+        ai = ai if ai >= lo else lo
+        ai = ai if ai <= hi else hi
+        a[i] = ai
+        vi = vi + ai * h
+        v_new.append(vi)
+        q_new.append(x[i] + vi * h)
+    return q_new + v_new + a + r + r_dot
+
+
 class RateLimiter(LeafSystem):
     """Tracks a position reference with bounded velocity, acceleration and jerk.
 
@@ -77,20 +140,21 @@ class RateLimiter(LeafSystem):
     def __init__(self, n: int, period: float, bandwidth: float, v_max, a_max, j_max,
                  reference_period: float, reference_scale: float = 1.0, lower=None, upper=None):
         super().__init__()
-        self._n, self._h, self._w = int(n), float(period), float(bandwidth)
-        self._v_max = np.broadcast_to(np.asarray(v_max, dtype=float), (n,)).copy()
-        self._a_max = np.broadcast_to(np.asarray(a_max, dtype=float), (n,)).copy()
-        self._j_max = np.broadcast_to(np.asarray(j_max, dtype=float), (n,)).copy()
-        self._tau_ref = float(reference_period)
+        self._n, h, w = int(n), float(period), float(bandwidth)
+
+        def per_joint(value) -> list:
+            return np.broadcast_to(np.asarray(value, dtype=float), (self._n,)).tolist()
+
+        # The docstring's constants, folded once to the same floats its
+        # expressions give: w^2, 2 w, j_max h, h / max(reference_period, h).
+        self._consts = LimiterConstants(h, w * w, 2.0 * w, h / max(float(reference_period), h),
+                                        [j * h for j in per_joint(j_max)], per_joint(a_max), per_joint(v_max))
         self._scale = float(reference_scale)
-        self._lower = None if lower is None else np.broadcast_to(np.asarray(lower, float), (n,)).copy()
-        self._upper = None if upper is None else np.broadcast_to(np.asarray(upper, float), (n,)).copy()
-        self._w2, self._2w = self._w * self._w, 2.0 * self._w
-        self._jh = self._j_max * self._h
-        self._gain_ref = self._h / max(self._tau_ref, self._h)
+        self._lower = None if lower is None else per_joint(lower)
+        self._upper = None if upper is None else per_joint(upper)
         self._ref = self.DeclareVectorInputPort("reference", n)
         self._x = self.DeclareDiscreteState(5 * n)
-        self.DeclarePeriodicDiscreteUpdateEvent(self._h, 0.0, self._update)
+        self.DeclarePeriodicDiscreteUpdateEvent(h, 0.0, self._update)
         self.DeclareVectorOutputPort("state", 2 * n, self._calc_state, {self.xd_ticket()})
         self.DeclareVectorOutputPort("acceleration", n, self._calc_accel, {self.xd_ticket()})
 
@@ -103,37 +167,16 @@ class RateLimiter(LeafSystem):
         x[3 * n:4 * n] = q
         context.get_mutable_discrete_state(self._x).SetFromVector(x)
 
-    def _reference(self, context):
-        r = self._scale * self._ref.Eval(context)
-        if self._lower is not None:
-            # np.clip's value for finite r, without its dispatch cost (this
-            # runs at 1 kHz in Python).
-            r = np.minimum(np.maximum(r, self._lower), self._upper)
-        return r
-
     def _update(self, context, discrete_state):
-        # The arithmetic of the class docstring, operation for operation;
-        # constants are folded once in __init__ (w^2, 2 w, j_max h, h / tau)
-        # to the same floats the expressions give.
-        h = self._h
-        q, v, a_prev, r_prev, r_dot = context.get_discrete_state(self._x).value().reshape(5, self._n)
-        r = self._reference(context)
-        r_dot = r_dot + self._gain_ref * ((r - r_prev) / h - r_dot)
-        a = self._w2 * (r - q) + self._2w * (r_dot - v)
-        # Scale, not clip per joint: the commanded joint motion keeps the IK's
-        # direction (near a singularity the IK moves joints in cancelling
-        # pairs, e.g. joints 1 and 3; clipping them differently moves the hand).
-        da = a - a_prev
-        jerk = (np.abs(da) / self._jh).max()
-        if jerk > 1.0:
-            a = a_prev + da / jerk
-        over = (np.abs(a) / self._a_max).max()
-        if over > 1.0:
-            a = a / over
-        a = np.minimum(np.maximum(a, (-self._v_max - v) / h), (self._v_max - v) / h)
-        v_new = v + a * h
-        q_new = q + v_new * h
-        discrete_state.set_value(self._x, np.concatenate([q_new, v_new, a, r, r_dot]))
+        # This runs at 1 kHz in Python for n <= 7: on Python floats it costs a
+        # fraction of the numpy version (whose per-call overhead dominates at
+        # this size) and gives the same floats (limiter_step's docstring).
+        x = context.get_discrete_state(self._x).value().tolist()
+        r = (self._scale * self._ref.Eval(context)).tolist()
+        if self._lower is not None:
+            r = [lo if ri < lo else ri for ri, lo in zip(r, self._lower)]   # np.maximum(r, lower)
+            r = [hi if ri > hi else ri for ri, hi in zip(r, self._upper)]   # np.minimum(r, upper)
+        discrete_state.set_value(self._x, limiter_step(x, r, self._consts))
 
     def _calc_state(self, context, output: BasicVector):
         x = context.get_discrete_state(self._x).value()
