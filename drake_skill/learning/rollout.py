@@ -58,11 +58,10 @@ from pydrake.systems.primitives import ConstantVectorSource
 from drake_skill.common import IkWarningCounter
 from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
-from drake_skill.station import simulation as _simulation
 from drake_skill.station.builder import Station, build_station
 from drake_skill.station.config import StationConfig, scenario_for_skill
-from drake_skill.station.simulation import DivergedError, pose_to_vector, record_station
-from drake_skill.station.success import judge_success
+from drake_skill.station.simulation import DivergedError, ReflexError, StationRecorder, pose_to_vector
+from drake_skill.station.success import judge_run
 
 __all__ = ["FAILURE_REASONS", "ActionModel", "ObjectPoseSource", "RolloutConfig", "RolloutResult",
            "RolloutRunner", "classify_failure"]
@@ -77,12 +76,6 @@ FAILURE_REASONS = ("diverged", "solver", "reflex", "perception", "non_finite", "
 # The station's failures carry their reason (ReflexError.reason = "reflex",
 # SolverError.reason = "solver", DivergedError.reason = "diverged"); the
 # recorder that watches for them and the settle-phase judge are the station's.
-_ReflexError = getattr(_simulation, "ReflexError", None)
-_StationRecorder = getattr(_simulation, "StationRecorder", None)
-try:
-    from drake_skill.station.success import judge_run as _judge_run
-except ImportError:  # pragma: no cover - older station
-    _judge_run = None
 
 
 class _PerceptionError(RuntimeError):
@@ -106,7 +99,7 @@ def classify_failure(error: BaseException) -> str:
     reason = getattr(error, "reason", None)
     if isinstance(reason, str) and reason in FAILURE_REASONS:
         return reason
-    if _ReflexError is not None and isinstance(error, _ReflexError):
+    if isinstance(error, ReflexError):
         return "reflex"
     if isinstance(error, DivergedError):
         return "diverged"
@@ -449,20 +442,12 @@ class RolloutRunner:
         self._check_trajectory()
         hz = self.rollout_config.record_hz
         n = int(np.ceil(self.duration() * hz - 1e-9))
-        if _StationRecorder is not None:
-            recorder = _StationRecorder(self.station, self.context, self.simulator, hz)
-            recorder.anchor()
-            recorder.record(n)
-            times, poses, objs = np.array(recorder.times), np.array(recorder.X_WE), np.array(recorder.obj)
-            force = np.array(recorder.force)
-        else:  # pragma: no cover - older station
-            times, poses, _, objs = record_station(self.simulator, self.station, self.context, 0.0, n, hz)
-            force = None
+        recorder = StationRecorder(self.station, self.context, self.simulator, hz)
+        recorder.anchor()
+        recorder.record(n)
+        times, poses, objs = np.array(recorder.times), np.array(recorder.X_WE), np.array(recorder.obj)
         final = float(objs[-1])
-        if _judge_run is not None and force is not None:
-            success = _judge_run(self.skill_name, times, objs, force, self.config.success)
-        else:  # pragma: no cover - older station
-            success = judge_success(self.skill_name, final, self.config.success)
+        success = judge_run(self.skill_name, times, objs, np.array(recorder.force), self.config.success)
         result.success, result.final_object_state = bool(success), final
         result.times, result.ee_pose, result.object_state = times, poses, objs
         if self.pipeline is not None:

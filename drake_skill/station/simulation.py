@@ -10,11 +10,12 @@ Simulator and one Context that every run reuses:
 
 :class:`StationRecorder` is the only code that advances and samples a
 station: ``StationSimulation.run``, the scripted demonstrator, the Meshcat
-teleoperation and the rollout runner (through :func:`record_station`) all use
-it, so they share one sampling grid, one divergence test, one collision
-reflex and, with perception, the object points of the ``ObjectSegmenter``
-system wired in the diagram (the same points and the same invalid-frame rule
-as skill executions: an invalid frame holds the last valid one).
+teleoperation and the rollout runner all use it (:func:`record_station`
+wraps it for a plain recording without frames), so they share one sampling
+grid, one divergence test, one collision reflex and, with perception, the
+object points of the ``ObjectSegmenter`` system wired in the diagram (the
+same points and the same invalid-frame rule as skill executions: an invalid
+frame holds the last valid one).
 
 A run ends early with an exception (all ``RuntimeError``): :class:`ReflexError`
 (the collision reflex: robot-scene contact force or external joint torque
