@@ -17,7 +17,8 @@ the process pool and on Ray, whichever worker runs which rollout.
 - :class:`SerialPool`: one runner in this process (``workers=1``).
 - :class:`ProcessPool`: ``workers`` processes started with ``spawn`` (no
   fork of a process holding Drake, VTK and torch threads), each with one
-  thread for numpy/BLAS/torch; tasks go to whichever worker is free. A
+  thread for numpy/BLAS/torch and the software renderer (:data:`_WORKER_ENV`);
+  tasks go to whichever worker is free. A
   worker that dies mid-rollout is replaced and its rollout recorded as
   failed (reason ``error``).
 - :class:`RayPool`: one Ray actor per worker (``pip install ray``): an
@@ -50,8 +51,13 @@ from drake_skill.learning.rollout import RolloutConfig, RolloutResult, RolloutRu
 __all__ = ["ProcessPool", "RayPool", "RunnerSpec", "SerialPool", "make_pool", "ray_available"]
 
 #: Environment of a worker process: one thread per numerical library, so N
-#: workers on N cores do not oversubscribe them.
-_WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+#: workers on N cores do not oversubscribe them; Mesa's software renderer
+#: (llvmpipe, headless EGL without a GPU) rasterises in the calling thread
+#: (``LP_NUM_THREADS=0``) instead of handing each frame to its own threads.
+#: None of these changes a number (the images are the same); only how the
+#: workers share the cores. A GPU driver ignores the last one.
+_WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+               "LP_NUM_THREADS": "0"}
 
 Task = tuple[np.ndarray, int]
 Progress = Callable[[int, RolloutResult], None]
