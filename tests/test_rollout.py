@@ -12,7 +12,7 @@ from drake_skill.learning.rollout import FAILURE_REASONS, ActionModel, RolloutCo
 from drake_skill.skill import Skill
 from drake_skill.station.config import scenario_for_skill
 from drake_skill.station.scripted import scripted_plan
-from drake_skill.station.simulation import DivergedError, StationSimulation, pose_to_vector
+from drake_skill.station.simulation import DivergedError, ReflexError, SolverError, StationSimulation, pose_to_vector
 
 from learning_support import SETTLE, TAU, rollout_config, shared_skill
 
@@ -92,6 +92,12 @@ def test_runaway_sample_is_a_failed_rollout_not_an_exception(draw_setup):
 
 def test_failures_are_classified_by_reason():
     assert classify_failure(DivergedError("simulation diverged at t = 1 s")) == "diverged"
+    assert classify_failure(ReflexError(2.0, 45.0, np.zeros(7), "force")) == "reflex"
+    assert classify_failure(SolverError("the contact solver failed", 3.0)) == "solver"
+    from drake_skill.learning import rollout   # the runner's own failures carry their reason too
+    assert classify_failure(rollout._PerceptionError("not seen")) == "perception"
+    assert classify_failure(rollout._NonFiniteError("return")) == "non_finite"
+    assert classify_failure(rollout._WorkspaceError("too far")) == "workspace"
     assert classify_failure(RuntimeError("SAP solver failed to converge")) == "solver"
     assert classify_failure(KeyError("x")) == "error"
     assert set(FAILURE_REASONS) >= {"diverged", "solver", "reflex", "perception", "non_finite", "error"}

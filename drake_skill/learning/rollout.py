@@ -60,7 +60,7 @@ from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
 from drake_skill.station.builder import Station, build_station
 from drake_skill.station.config import StationConfig, scenario_for_skill
-from drake_skill.station.simulation import DivergedError, ReflexError, StationRecorder, pose_to_vector
+from drake_skill.station.simulation import StationRecorder, pose_to_vector
 from drake_skill.station.success import judge_run
 
 __all__ = ["FAILURE_REASONS", "ActionModel", "ObjectPoseSource", "RolloutConfig", "RolloutResult",
@@ -73,13 +73,11 @@ __all__ = ["FAILURE_REASONS", "ActionModel", "ObjectPoseSource", "RolloutConfig"
 #: (checked before simulating); any other exception.
 FAILURE_REASONS = ("diverged", "solver", "reflex", "perception", "non_finite", "workspace", "error")
 
-# The station's failures carry their reason (ReflexError.reason = "reflex",
-# SolverError.reason = "solver", DivergedError.reason = "diverged"); the
-# recorder that watches for them and the settle-phase judge are the station's.
-
 
 class _PerceptionError(RuntimeError):
     """The segmenter did not see the object at the start of the rollout."""
+
+    reason = "perception"
 
 
 class _NonFiniteError(RuntimeError):
@@ -95,18 +93,15 @@ class _WorkspaceError(RuntimeError):
 
 
 def classify_failure(error: BaseException) -> str:
-    """The :data:`FAILURE_REASONS` entry for an exception raised by a rollout."""
+    """The :data:`FAILURE_REASONS` entry for an exception raised by a rollout.
+
+    The station's failures carry their reason (``ReflexError.reason`` =
+    "reflex", ``SolverError`` "solver", ``DivergedError`` "diverged"), as do
+    this module's; anything else is classified by its message.
+    """
     reason = getattr(error, "reason", None)
     if isinstance(reason, str) and reason in FAILURE_REASONS:
         return reason
-    if isinstance(error, ReflexError):
-        return "reflex"
-    if isinstance(error, DivergedError):
-        return "diverged"
-    if isinstance(error, _PerceptionError):
-        return "perception"
-    if isinstance(error, _NonFiniteError):
-        return "non_finite"
     text = str(error)
     if "converge" in text and ("SAP" in text or "solver" in text):
         return "solver"
