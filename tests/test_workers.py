@@ -1,5 +1,7 @@
 """Rollouts on worker processes (and Ray): the same seeds give the same numbers."""
 
+import dataclasses as dc
+
 import numpy as np
 import pytest
 
@@ -60,6 +62,24 @@ def test_pool_arguments_are_checked(setup):
         make_pool(spec, workers=0)
     with pytest.raises(FileNotFoundError, match="skill.json"):
         RunnerSpec.create("/nonexistent/skill", None)
+
+
+def test_a_demonstrations_dmp_runs_with_its_own_goal_and_duration(setup):
+    """Plain imitation of demonstration j (``evaluate --all-demos``) executes DMP j whole:
+    its weights, goal and duration, not its weights on the initial DMP's goal."""
+    spec, _, _ = setup
+    skill = Skill.load(spec.skill_dir)
+    other = 1 - skill.initial_index
+    assert not np.allclose(skill.dmps[other].goal, skill.initial_dmp.goal)   # the check can fail
+    for index, expected in ((None, skill.initial_dmp), (other, skill.dmps[other])):
+        runner = dc.replace(spec, dmp_index=index).build()
+        runner.reset(expected.weights, 35)
+        dmp = runner.dmp_system.get_dmp(runner.dmp_system.GetMyContextFromRoot(runner.context))
+        np.testing.assert_array_equal(dmp.goal, expected.goal)
+        np.testing.assert_array_equal(dmp.weights, expected.weights)
+        assert dmp.tau == expected.tau and runner.duration() == expected.tau + runner.settle_time
+    with pytest.raises(ValueError, match="dmp_index 2: the skill .* has 2 demonstration DMPs"):
+        dc.replace(spec, dmp_index=2).build()
 
 
 @pytest.mark.skipif(not ray_available(), reason="ray is not installed (optional: pip install ray)")

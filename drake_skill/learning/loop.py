@@ -560,7 +560,8 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
     """Greedy success of a skill (initial or learned) over ``poses`` held-out object poses.
 
     Executes the skill's policy (its initial DMP, the learned one in a skill
-    written by :func:`learn`; with ``all_demos`` each demonstration's DMP)
+    written by :func:`learn`; with ``all_demos`` each demonstration's DMP:
+    its weights, goal and duration)
     on the poses of seeds ``seed0 .. seed0 + poses - 1`` and judges each from
     the simulator's ground truth. Returns a JSON-able report: per policy
     (key = DMP index) the :func:`evaluate_greedy` report, plus the settings.
@@ -582,18 +583,22 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
                               "learned": "learning" in skill.info, "initial_index": skill.initial_index,
                               "policies": {}}
     start = time.perf_counter()
-    spec = RunnerSpec.create(skill_dir, station_config, rollout_config)
-    with make_pool(spec, workers, ray_address) as pool:
-        for index in indices:
-            from tqdm import tqdm
-            bar = tqdm(total=len(seeds), desc=f"DMP {index}", unit="rollout", disable=not progress,
-                       leave=False, file=sys.stderr)
-            try:
+    from tqdm import tqdm
+
+    for index in indices:
+        # Each demonstration's DMP whole: its weights with its own goal and
+        # duration (a pool per DMP: the runner's DmpSystem is built with them).
+        spec = RunnerSpec.create(skill_dir, station_config, rollout_config,
+                                 dmp_index=None if index == skill.initial_index else index)
+        bar = tqdm(total=len(seeds), desc=f"DMP {index}", unit="rollout", disable=not progress,
+                   leave=False, file=sys.stderr)
+        try:
+            with make_pool(spec, workers, ray_address) as pool:
                 policy, _ = evaluate_greedy(pool, skill.dmps[index].weights, seeds, lambda i, r: bar.update(1))
-            finally:
-                bar.close()
-            policy["initial"] = index == skill.initial_index
-            report["policies"][str(index)] = policy
+        finally:
+            bar.close()
+        policy["initial"] = index == skill.initial_index
+        report["policies"][str(index)] = policy
     report["success_rate"] = report["policies"][str(skill.initial_index)]["success_rate"] \
         if str(skill.initial_index) in report["policies"] else None
     report["wall_s"] = round(time.perf_counter() - start, 1)

@@ -282,11 +282,20 @@ class RolloutRunner:
             instead of ``build_station(station_config)``, e.g. the hardware
             station (``drake_skill.station.hardware``); its ``realtime``
             attribute, when true, paces the simulator at real time.
+        dmp: the DMP whose goal g and duration tau every rollout executes
+            (default the skill's initial DMP, the one policy search starts
+            from; ``run`` sets only the weights). Plain imitation of another
+            demonstration passes that demonstration's DMP: its weights are
+            fitted to its own goal and duration.
     """
 
     def __init__(self, skill, station_config: StationConfig | None = None,
-                 config: RolloutConfig | None = None, meshcat=None, station=None):
+                 config: RolloutConfig | None = None, meshcat=None, station=None, dmp: Dmp | None = None):
         self.skill = skill
+        self.dmp = skill.initial_dmp if dmp is None else dmp
+        if self.dmp.weights.shape != skill.initial_dmp.weights.shape:
+            raise ValueError(f"dmp: weights of shape {self.dmp.weights.shape}, the skill's DMPs have "
+                             f"{skill.initial_dmp.weights.shape}")
         self.rollout_config = (config or RolloutConfig()).validate()
         if station is not None:
             station_config = station.config
@@ -306,7 +315,7 @@ class RolloutRunner:
             "station", station if station is not None else build_station(station_config, meshcat))
         self.config = self.station.config
         self.pose_source = builder.AddNamedSystem("object_pose", ObjectPoseSource())
-        self.dmp_system = builder.AddNamedSystem("dmp", DmpSystem(skill.initial_dmp, dmp_config))
+        self.dmp_system = builder.AddNamedSystem("dmp", DmpSystem(self.dmp, dmp_config))
         self.dmp_config = self.dmp_system.config
         # The skill's constant finger opening (docs/method.md section 2).
         gripper = builder.AddNamedSystem("gripper", ConstantVectorSource([float(skill.gripper_opening)]))
@@ -335,7 +344,7 @@ class RolloutRunner:
 
     @property
     def weights_shape(self) -> tuple[int, int]:
-        return self.skill.initial_dmp.weights.shape
+        return self.dmp.weights.shape
 
     def _sub(self, system):
         return system.GetMyMutableContextFromRoot(self.context)
@@ -385,7 +394,7 @@ class RolloutRunner:
 
     def duration(self) -> float:
         """Simulated time of a rollout [s]: tau + settle time."""
-        return self.skill.initial_dmp.tau + self.settle_time
+        return self.dmp.tau + self.settle_time
 
     def _check_trajectory(self) -> None:
         dmp = self.dmp_system.get_dmp(self._sub(self.dmp_system))

@@ -70,17 +70,20 @@ class RunnerSpec:
     skill_dir: a saved :class:`~drake_skill.skill.Skill`; station_yaml: the
     ``StationConfig`` as YAML (``yaml_dump_typed``); rollout: the
     ``RolloutConfig`` fields; quiet_ik: drop differential IK's warnings in
-    the worker after counting them (the main process reports the counts).
+    the worker after counting them (the main process reports the counts);
+    dmp_index: the demonstration whose DMP (goal and duration) the rollouts
+    execute (None: the skill's initial DMP; ``RolloutRunner``'s ``dmp``).
     """
 
     skill_dir: str
     station_yaml: str
     rollout: dict
     quiet_ik: bool = True
+    dmp_index: int | None = None
 
     @classmethod
     def create(cls, skill_dir, station_config, rollout_config: RolloutConfig | None = None,
-               quiet_ik: bool = True) -> "RunnerSpec":
+               quiet_ik: bool = True, dmp_index: int | None = None) -> "RunnerSpec":
         from pydrake.common.yaml import yaml_dump_typed
 
         if not (Path(skill_dir) / "skill.json").is_file():
@@ -88,7 +91,7 @@ class RunnerSpec:
                                     "skill directory; save it first)")
         rollout_config = (rollout_config or RolloutConfig()).validate()
         return cls(str(Path(skill_dir).resolve()), yaml_dump_typed(station_config),
-                   dc.asdict(rollout_config), quiet_ik)
+                   dc.asdict(rollout_config), quiet_ik, None if dmp_index is None else int(dmp_index))
 
     def build(self, meshcat=None) -> RolloutRunner:
         from pydrake.common.yaml import yaml_load_typed
@@ -98,8 +101,14 @@ class RunnerSpec:
 
         station_config = yaml_load_typed(schema=StationConfig, data=self.station_yaml,
                                          defaults=StationConfig())
-        return RolloutRunner(Skill.load(self.skill_dir), station_config, RolloutConfig(**self.rollout),
-                             meshcat=meshcat)
+        skill = Skill.load(self.skill_dir)
+        dmp = None
+        if self.dmp_index is not None:
+            if not 0 <= self.dmp_index < len(skill.dmps):
+                raise ValueError(f"dmp_index {self.dmp_index}: the skill in {self.skill_dir} has "
+                                 f"{len(skill.dmps)} demonstration DMPs (0..{len(skill.dmps) - 1})")
+            dmp = skill.dmps[self.dmp_index]
+        return RolloutRunner(skill, station_config, RolloutConfig(**self.rollout), meshcat=meshcat, dmp=dmp)
 
 
 class _Pool:
