@@ -6,12 +6,12 @@
 Executes the skill's policy without exploration (a fitted skill's initial
 DMP, i.e. plain imitation; a skill written by ``drake-skill learn``, the
 learned DMP; with ``--all-demos`` every demonstration's DMP, each with its
-own goal and duration) on ``--poses``
-object poses drawn from the seeds ``seed0, seed0 + 1, ...`` (the held-out
-poses ``drake-skill learn`` reports, none a demonstration's) and judges each
-from the simulator's ground truth (docs/method.md section 5). The object
-frame comes from the segmenter's estimate on the camera's first frame, or
-from the ground truth with ``--ground-truth-pose``.
+own goal and duration) on ``--poses`` object poses drawn from the seeds
+``seed0, seed0 + 1, ...`` (the held-out poses ``drake-skill learn``
+reports, none a demonstration's) and judges each from the simulator's
+ground truth (docs/method.md section 5). The object frame comes from the
+segmenter's estimate on the camera's first frame, or from the ground truth
+with ``--ground-truth-pose``.
 
 Prints a table (success rate, the goal model's verdicts, mean learned
 return, final lid angle / drawer travel, failures) and writes the report as
@@ -49,7 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--ray-address", default=None, help="run on Ray actors of this cluster")
     parser.add_argument("--ground-truth-pose", action="store_true",
                         help="object frame from the simulator's ground truth instead of the segmenter")
-    parser.add_argument("--all-demos", action="store_true", help="evaluate every demonstration's DMP (its weights, goal and duration): "
+    parser.add_argument("--all-demos", action="store_true",
+                        help="evaluate every demonstration's DMP (its weights, goal and duration): "
                              "plain imitation of each demonstration")
     parser.add_argument("--explore", type=int, default=0, metavar="N",
                         help="instead: N exploratory rollouts sampled from the skill's Sigma_0 (policy "

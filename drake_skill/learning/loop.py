@@ -588,8 +588,7 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
     for index in indices:
         # Each demonstration's DMP whole: its weights with its own goal and
         # duration (a pool per DMP: the runner's DmpSystem is built with them).
-        spec = RunnerSpec.create(skill_dir, station_config, rollout_config,
-                                 dmp_index=None if index == skill.initial_index else index)
+        spec = RunnerSpec.create(skill_dir, station_config, rollout_config, dmp_index=index)
         bar = tqdm(total=len(seeds), desc=f"DMP {index}", unit="rollout", disable=not progress,
                    leave=False, file=sys.stderr)
         try:
