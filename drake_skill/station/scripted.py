@@ -49,6 +49,7 @@ OPEN_R_OE = RotationMatrix(np.column_stack([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0
 OPEN_OPENING = 0.08        # finger opening [m]: one finger under the lip, the other in front of the box
 FINGER_WIDTH = 0.018       # a finger's extent across the opening direction [m]
 OPEN_TIP_Y = -0.11         # fingertip along the lip [m] (the box spans y -0.15..0.15)
+OPEN_FINGER_X = -0.1125    # the finger's centre under the lip [m] (the lip spans x -0.125..-0.100)
 OPEN_CLEARANCE = 0.004     # the finger slides in this far below the lid's underside [m]
 OPEN_PUSH = 0.002          # then presses this far into it as it lifts [m]
 OPEN_TURN_TIME = 3.0      # the move from home, turning the hand 120 degrees [s]
@@ -112,7 +113,7 @@ def keyframes(skill: str, follow_through: float = 1.0) -> list[tuple[float, np.n
         hinge = _xyz(LID_HINGE_XZ)
         # Finger under the lip: across x -0.1215..-0.1035 (the lip spans
         # -0.125..-0.100), its tip OPEN_TIP_Y along the lip from the box's side.
-        tcp_in = np.array([-0.1125 - (OPEN_OPENING / 2 + FINGER_WIDTH / 2), OPEN_TIP_Y - TCP_TO_TIP,
+        tcp_in = np.array([OPEN_FINGER_X - (OPEN_OPENING / 2 + FINGER_WIDTH / 2), OPEN_TIP_Y - TCP_TO_TIP,
                            0.13 - FINGER_HALF_THICKNESS - OPEN_CLEARANCE])
         tcp_touch = tcp_in + [0.0, 0.0, OPEN_CLEARANCE + OPEN_PUSH]
         out = [0.0, -0.09, 0.0]
