@@ -6,8 +6,11 @@ import numpy as np
 import pytest
 
 from drake_skill.cli.main import main
-from drake_skill.learning.loop import ARTIFACTS, EXPLORATION_SCALES
+from drake_skill.learning.loop import ARTIFACTS, EXPLORATION_SCALES, plot_outcomes_by_placement
 from drake_skill.skill import Skill
+from drake_skill.station.builder import Station
+from drake_skill.station.config import load_station_config, scenario_for_skill
+from pydrake.math import RollPitchYaw
 
 from learning_support import shared_skill
 
@@ -76,6 +79,30 @@ def test_evaluate_the_learned_skill(learned, capsys):
     held = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()][-1]
     policy = report["policies"][str(report["initial_index"])]
     assert policy["successes"] == held["successes"] and policy["returns"] == held["returns"]
+    # Per rollout: where the object stood (the station's pose of that seed) and why it failed.
+    config = load_station_config(shared["station_yaml"], defaults=scenario_for_skill(report["skill"]))
+    config.enable_camera = False     # the object's placement does not need the camera
+    station = Station(config)
+    X_WO = station.random_object_pose(900000)
+    (x, y, yaw), = policy["object_poses"]
+    assert np.allclose([x, y], X_WO.translation()[:2], atol=1e-9)
+    assert yaw == pytest.approx(RollPitchYaw(X_WO.rotation()).yaw_angle(), abs=1e-9)
+    assert policy["reasons"] == [held["reasons"][0]] and (policy["reasons"][0] != "") == bool(policy["failures"])
+    assert (out / "skill" / "evaluation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_placement_plot_marks_every_outcome(tmp_path):
+    """One panel per policy, side by side; a rollout without a placement is left out."""
+    report = {"skill": "open", "object_pose": "perceived", "learned": False, "policies": {
+        "0": {"initial": False, "success_rate": 0.5, "successes": [True, False, False, False],
+              "reasons": ["", "reflex", "", "solver"], "final_object_state": [1.9, None, 0.0, None],
+              "object_poses": [[0.58, -0.01, 0.02], [0.61, 0.0, -0.05], [0.60, 0.01, 0.0], None]},
+        "1": {"initial": True, "success_rate": 0.0, "successes": [False], "reasons": [""],
+              "final_object_state": [0.3], "object_poses": [[0.6, 0.0, 0.0]]}}}
+    path = plot_outcomes_by_placement(report, tmp_path / "evaluation.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    from PIL import Image
+    assert Image.open(path).size[0] > Image.open(path).size[1]   # two panels side by side
 
 
 def test_evaluate_explore_reports_the_spread_of_exploratory_returns(learned, capsys, tmp_path):
@@ -87,6 +114,8 @@ def test_evaluate_explore_reports_the_spread_of_exploratory_returns(learned, cap
     report = json.loads(capsys.readouterr().out)
     assert report == json.loads(out.read_text())
     assert report["seeds"] == [900000, 900001] and len(report["returns"]) == 2
+    assert len(report["object_poses"]) == 2 and report["object_poses"][0] != report["object_poses"][1]
+    assert out.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert report["exploration_scale"] == EXPLORATION_SCALES[Skill.load(shared["skill_dir"]).name]
     spread = report["return_spread"]
     assert spread["min"] == min(report["returns"]) and spread["max"] == max(report["returns"])

@@ -15,15 +15,18 @@ with ``--ground-truth-pose``.
 
 Prints a table (success rate, the goal model's verdicts, mean learned
 return, final lid angle / drawer travel, failures) and writes the report as
-JSON to ``--out`` (default ``DIR/evaluation.json``); ``--json`` prints that
-JSON object instead of the table.
+JSON to ``--out`` (default ``DIR/evaluation.json``; per rollout its seed,
+object placement, outcome and failure reason); ``--json`` prints that JSON
+object instead of the table. Beside it, the same name with ``.png``: where
+on the table each policy succeeded and failed (one panel per DMP), which
+shows the band of object placements a plain imitation succeeds in.
 
 With ``--explore N`` it runs instead the N exploratory rollouts policy
 search's first episode would run (weights sampled from N(W_0, Sigma_b^0),
 seeded by --seed0, one pose each) and reports the spread of their learned
 returns, their successes and final object states (default out
-``DIR/exploration.json``): whether the learned reward gives policy search
-something to climb.
+``DIR/exploration.json``, and ``exploration.png``): whether the learned
+reward gives policy search something to climb.
 """
 
 from __future__ import annotations
@@ -59,14 +62,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"with --explore: sample from S x Sigma_0 (default: the skill's, as "
                              f"drake-skill learn: {exploration_scales_text()})")
     parser.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE", help="scenario YAML (StationConfig; default: the skill's scenario)")
-    parser.add_argument("--out", type=Path, default=None, help="JSON report (default SKILL/evaluation.json)")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="JSON report (default SKILL/evaluation.json); the placement plot goes beside it "
+                             "with the suffix .png")
     parser.add_argument("--json", action="store_true", help="print the JSON report instead of the table")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args: argparse.Namespace) -> int:
     from drake_skill.fileio import atomic_write_json
-    from drake_skill.learning.loop import evaluate_skill, evaluation_table
+    from drake_skill.learning.loop import evaluate_skill, evaluation_table, plot_outcomes_by_placement
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.skill import Skill
     from drake_skill.station.config import load_station_config, scenario_for_skill
@@ -94,9 +99,10 @@ def run(args: argparse.Namespace) -> int:
                                exploration_scale=args.exploration_scale)
         out = args.out if args.out is not None else args.skill / "exploration.json"
         atomic_write_json(out, report)
+        plot = plot_outcomes_by_placement(report, _plot_path(out))
         print(json.dumps(report, sort_keys=True) if args.json else exploration_table(report))
         if not args.json:
-            print(f"wrote {out}")
+            print(f"wrote {out} and {plot}")
         return 0
     report = evaluate_skill(
         args.skill, poses=args.poses, seed0=args.seed0, station_config=station,
@@ -104,12 +110,18 @@ def run(args: argparse.Namespace) -> int:
         progress=not (args.quiet or args.json))
     out = args.out if args.out is not None else args.skill / "evaluation.json"
     atomic_write_json(out, report)
+    plot = plot_outcomes_by_placement(report, _plot_path(out))
     if args.json:
         print(json.dumps(report, sort_keys=True))
     else:
         print(evaluation_table(report))
-        print(f"wrote {out}")
+        print(f"wrote {out} and {plot}")
     return 0
+
+
+def _plot_path(out: Path) -> Path:
+    """The placement plot's path beside the JSON report ``out`` (never ``out`` itself)."""
+    return out.with_suffix(".png") if out.suffix != ".png" else out.with_name(out.name + ".png")
 
 
 def main(argv=None) -> int:

@@ -208,7 +208,10 @@ def results_report(seeds, results) -> dict[str, Any]:
     """JSON-able summary of rollouts on the poses of ``seeds``: ground-truth
     ``success_rate`` and ``successes``, ``verdicts``, ``returns`` (0 for a
     failed rollout), ``final_object_state`` (None where failed), ``failures``
-    (reason -> count) and ``ik_warnings``."""
+    (reason -> count), per rollout its failure ``reasons`` ("" where it did
+    not fail) and ``object_poses`` (the object's true placement on the table,
+    [x m, y m, yaw rad] in the world frame; None where unknown), and
+    ``ik_warnings``."""
     return {
         "seeds": [int(s) for s in seeds],
         "success_rate": float(np.mean([r.success for r in results])) if results else float("nan"),
@@ -218,8 +221,22 @@ def results_report(seeds, results) -> dict[str, Any]:
         "final_object_state": [None if not math.isfinite(r.final_object_state) else float(r.final_object_state)
                                for r in results],
         "failures": dict(Counter(r.reason for r in results if r.failed)),
+        "reasons": [str(r.reason) if r.failed else "" for r in results],
+        "object_poses": [_placement(r.object_pose_true) for r in results],
         "ik_warnings": int(sum(r.ik_warnings for r in results)),
     }
+
+
+def _placement(pose) -> list[float] | None:
+    """[x, y, yaw] of an object pose vector (xyz [m] + wxyz), or None if it is not finite."""
+    pose = np.asarray(pose, dtype=float)
+    if pose.shape != (7,) or not np.all(np.isfinite(pose)):
+        return None
+    from pydrake.common.eigen_geometry import Quaternion
+    from pydrake.math import RollPitchYaw
+
+    yaw = RollPitchYaw(Quaternion(pose[3:] / np.linalg.norm(pose[3:]))).yaw_angle()
+    return [float(pose[0]), float(pose[1]), float(yaw)]
 
 
 def exploration_size(search) -> float:
@@ -261,6 +278,76 @@ def plot_learning_curve(curve: list[dict], path, title: str = "") -> Path:
     if title:
         fig.suptitle(title)
     fig.tight_layout()
+    try:
+        return write_figure_png(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
+
+
+#: Marker and colour per rollout outcome in :func:`plot_outcomes_by_placement`.
+_OUTCOME_STYLE = {"success": ("o", "tab:green"), "not achieved": ("o", "tab:orange"),
+                  "reflex": ("X", "tab:red")}
+
+
+def plot_outcomes_by_placement(report: dict[str, Any], path, title: str = "") -> Path:
+    """Where on the table each rollout of an :func:`evaluate_skill` or
+    :func:`explore_skill` report succeeded, to a PNG: one panel per policy,
+    each object placement (x, y [mm], its x axis drawn for the yaw) marked by
+    the outcome (success; run to the end without success, labelled with the
+    final lid angle [rad] or drawer travel [m]; a failure, by reason).
+
+    Plain imitation of a DMP succeeds in a band of placements around its
+    demonstration's (docs/method.md section 6): the plot shows the band.
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from drake_skill.fileio import write_figure_png
+
+    if "policies" in report:
+        panels = []
+        for index, p in report["policies"].items():
+            role = " (learned)" if p["initial"] and report.get("learned") else " (initial)" if p["initial"] else ""
+            panels.append((f"DMP {index}{role}", p))
+    else:
+        panels = [(f"{len(report['seeds'])} exploratory rollouts", report)]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.2), squeeze=False)
+    placed = np.array([1000.0 * np.asarray(pose[:2]) for _, p in panels
+                       for pose in p.get("object_poses", []) if pose is not None]).reshape(-1, 2)
+    centre = placed.mean(axis=0) if len(placed) else np.zeros(2)
+    half = max(float(np.abs(placed - centre).max()) if len(placed) else 0.0, 10.0) + 12.0
+    seen = set()                                   # one legend entry per outcome
+    for ax, (name, p) in zip(axes[0], panels):
+        for k, pose in enumerate(p.get("object_poses", [])):
+            if pose is None:
+                continue
+            x, y, yaw = 1000.0 * pose[0], 1000.0 * pose[1], pose[2]
+            reason = p["reasons"][k]
+            outcome = "success" if p["successes"][k] else (reason or "not achieved")
+            marker, colour = _OUTCOME_STYLE.get(outcome, ("X", "tab:purple"))
+            ax.plot([x, x + 8.0 * np.cos(yaw)], [y, y + 8.0 * np.sin(yaw)], "-", color="0.6", lw=1)
+            ax.plot(x, y, marker, color=colour, ms=8, label=None if outcome in seen else outcome)
+            seen.add(outcome)
+            final = p["final_object_state"][k]
+            if outcome == "not achieved" and final is not None:
+                final = 0.0 if abs(final) < 5e-3 else final      # no "-0.00" for a lid at rest on its seat
+                ax.annotate(f"{final:.2f}", (x, y), textcoords="offset points", xytext=(5, -10), fontsize=7)
+        ax.set_title(f"{name}: {p['success_rate'] * 100:.0f} % success", fontsize=10)
+        ax.set_xlabel("object x [mm] (away from the robot)")
+        ax.set_xlim(centre[0] - half, centre[0] + half)
+        ax.set_ylim(centre[1] - half, centre[1] + half)
+        ax.set_aspect("equal", adjustable="box")
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel("object y [mm]")
+    legend = dict(pair for ax in axes[0] for pair in zip(*ax.get_legend_handles_labels()[::-1]))
+    rank = list(_OUTCOME_STYLE)                    # success first, failures by reason last
+    labels = sorted(legend, key=lambda label: (rank.index(label) if label in rank else len(rank), label))
+    fig.legend([legend[label] for label in labels], labels, loc="lower center", ncol=max(1, len(labels)),
+               fontsize=8, frameon=False)
+    fig.suptitle(title or f"{report['skill']}: outcome by object placement "
+                          f"(object frame {report['object_pose']})", fontsize=11)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
     try:
         return write_figure_png(fig, path, dpi=110)
     finally:
