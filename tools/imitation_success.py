@@ -11,8 +11,9 @@ imitation figures are reported in (the skill's initial policy, or with
 ``--all-demos`` every demonstration's DMP with its own goal and duration,
 on the 10 held-out object poses ``drake-skill learn`` reports, the object
 frame from the segmenter's estimate on the camera's first frame, judged
-from the simulator's ground truth). ``drake-skill evaluate --help`` lists
-the options.
+from the simulator's ground truth). Beside the JSON, ``imitation.png``
+shows where on the table each DMP succeeded. ``drake-skill evaluate
+--help`` lists the options.
 """
 
 import argparse
