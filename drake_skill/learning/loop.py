@@ -340,7 +340,10 @@ def plot_outcomes_by_placement(report: dict[str, Any], path, title: str = "") ->
         ax.set_aspect("equal", adjustable="box")
         ax.grid(alpha=0.3)
     axes[0][0].set_ylabel("object y [mm]")
-    legend = dict(pair for ax in axes[0] for pair in zip(*ax.get_legend_handles_labels()[::-1]))
+    legend = {}                                    # label -> handle, over every panel
+    for ax in axes[0]:
+        handles, labels = ax.get_legend_handles_labels()
+        legend.update(zip(labels, handles))
     rank = list(_OUTCOME_STYLE)                    # success first, failures by reason last
     labels = sorted(legend, key=lambda label: (rank.index(label) if label in rank else len(rank), label))
     fig.legend([legend[label] for label in labels], labels, loc="lower center", ncol=max(1, len(labels)),
