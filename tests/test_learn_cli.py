@@ -1,5 +1,6 @@
 """``drake-skill learn`` end to end (1 episode x 2 rollouts) and ``drake-skill evaluate``."""
 
+import dataclasses as dc
 import json
 
 import numpy as np
@@ -9,7 +10,6 @@ from drake_skill.cli.main import main
 from drake_skill.learning.loop import ARTIFACTS, EXPLORATION_SCALES, plot_outcomes_by_placement
 from drake_skill.skill import Skill
 from drake_skill.station.builder import Station
-from drake_skill.station.config import load_station_config, scenario_for_skill
 from pydrake.math import RollPitchYaw
 
 from learning_support import shared_skill
@@ -80,9 +80,7 @@ def test_evaluate_the_learned_skill(learned, capsys):
     policy = report["policies"][str(report["initial_index"])]
     assert policy["successes"] == held["successes"] and policy["returns"] == held["returns"]
     # Per rollout: where the object stood (the station's pose of that seed) and why it failed.
-    config = load_station_config(shared["station_yaml"], defaults=scenario_for_skill(report["skill"]))
-    config.enable_camera = False     # the object's placement does not need the camera
-    station = Station(config)
+    station = Station(dc.replace(shared["station"], enable_camera=False))   # the placement needs no camera
     X_WO = station.random_object_pose(900000)
     (x, y, yaw), = policy["object_poses"]
     assert np.allclose([x, y], X_WO.translation()[:2], atol=1e-9)

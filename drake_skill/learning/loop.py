@@ -222,21 +222,21 @@ def results_report(seeds, results) -> dict[str, Any]:
                                for r in results],
         "failures": dict(Counter(r.reason for r in results if r.failed)),
         "reasons": [str(r.reason) if r.failed else "" for r in results],
-        "object_poses": [_placement(r.object_pose_true) for r in results],
+        "object_poses": [_placement(r) for r in results],
         "ik_warnings": int(sum(r.ik_warnings for r in results)),
     }
 
 
-def _placement(pose) -> list[float] | None:
-    """[x, y, yaw] of an object pose vector (xyz [m] + wxyz), or None if it is not finite."""
-    pose = np.asarray(pose, dtype=float)
-    if pose.shape != (7,) or not np.all(np.isfinite(pose)):
+def _placement(result) -> list[float] | None:
+    """[x m, y m, yaw rad] of a rollout's true object pose (``RolloutResult.X_WO_true``), or
+    None where it is unknown (not finite)."""
+    if not np.all(np.isfinite(result.object_pose_true)):
         return None
-    from pydrake.common.eigen_geometry import Quaternion
     from pydrake.math import RollPitchYaw
 
-    yaw = RollPitchYaw(Quaternion(pose[3:] / np.linalg.norm(pose[3:]))).yaw_angle()
-    return [float(pose[0]), float(pose[1]), float(yaw)]
+    X_WO = result.X_WO_true
+    x, y, _ = X_WO.translation()
+    return [float(x), float(y), float(RollPitchYaw(X_WO.rotation()).yaw_angle())]
 
 
 def exploration_size(search) -> float:
