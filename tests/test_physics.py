@@ -60,7 +60,8 @@ def test_arm_holds_home_for_60_s_with_the_gripper_commanded_closed(box_sim):
 
 def test_commanded_joint_accelerations_stay_within_franka_limits_on_a_step(box_sim):
     """A 20 cm step of the hand pose: the rate limiter keeps the commanded
-    acceleration and velocity within Franka's limits at every 1 ms tick."""
+    acceleration and velocity within Franka's limits at every update (the
+    limiter's 1 ms steps, taken a plant step's worth at a time)."""
     box_sim.reset(0)
     home = box_sim.home_pose()
     step = RigidTransform(home.rotation(), home.translation() + [0.10, 0.15, -0.10])
@@ -69,14 +70,15 @@ def test_commanded_joint_accelerations_stay_within_franka_limits_on_a_step(box_s
     acc_port = station.GetOutputPort("joint_acceleration_commanded")
     state_port = station.ee_controller.GetOutputPort("panda_state_desired")
     ctrl_context = station.ee_controller.GetMyContextFromRoot(box_sim.context)
+    update = box_sim.config.time_step      # the limiter's update period (RateLimiter.update_period)
     peak_a, peak_v, prev_v = np.zeros(7), np.zeros(7), None
-    for k in range(1, 1500):
-        box_sim.simulator.AdvanceTo(k * 1e-3)
+    for k in range(1, int(round(1.5 / update))):
+        box_sim.simulator.AdvanceTo(k * update)
         a = np.asarray(acc_port.Eval(context))
         v = np.asarray(state_port.Eval(ctrl_context))[7:]
         peak_a, peak_v = np.maximum(peak_a, np.abs(a)), np.maximum(peak_v, np.abs(v))
         if prev_v is not None:
-            assert np.all(np.abs(v - prev_v) <= limits.QDD_MAX * 1e-3 * (1 + 1e-9))
+            assert np.all(np.abs(v - prev_v) <= limits.QDD_MAX * update * (1 + 1e-9))
         prev_v = v
     assert np.all(peak_a <= limits.QDD_MAX * (1 + 1e-9)) and np.all(peak_v <= limits.QD_MAX * (1 + 1e-9))
     # The limits are reached (the step is a real test of the limiter), and the hand arrives.
@@ -102,6 +104,28 @@ def _limiter_step_vector_form(x, r, c):
     a = np.minimum(np.maximum(a, (-v_max - v) / c.h), (v_max - v) / c.h)
     v_new = v + a * c.h
     return np.concatenate([q + v_new * c.h, v_new, a, r, r_dot])
+
+
+def test_rate_limiter_updating_every_plant_step_takes_its_1_ms_steps_in_turn():
+    """A RateLimiter updated every 2 ms gives, at each update, the floats of two
+    limiter_step calls with the reference read at the update, and its period
+    must divide the update period."""
+    from drake_skill.station.controller import RateLimiter, limiter_step
+
+    limiter = RateLimiter(7, 1e-3, 30.0, limits.QD_MAX, limits.QDD_MAX, limits.QDDD_MAX, 0.01, update_period=2e-3)
+    context = limiter.CreateDefaultContext()
+    limiter.set_position(context, np.zeros(7))
+    rng = np.random.default_rng(1)
+    x = context.get_discrete_state_vector().CopyToVector().tolist()
+    for _ in range(20):
+        r = rng.uniform(-0.05, 0.05, 7)
+        limiter.get_input_port().FixValue(context, r)
+        x = limiter_step(limiter_step(x, r.tolist(), limiter._consts), r.tolist(), limiter._consts)
+        values = limiter.EvalUniquePeriodicDiscreteUpdate(context)
+        context.SetDiscreteState(values)
+        assert values.get_vector().CopyToVector().tolist() == x
+    with pytest.raises(ValueError, match="whole number of periods"):
+        RateLimiter(7, 1e-3, 30.0, limits.QD_MAX, limits.QDD_MAX, limits.QDDD_MAX, 0.01, update_period=1.5e-3)
 
 
 def test_limiter_step_gives_the_floats_of_the_vector_form():

@@ -41,6 +41,8 @@ the values are the scenario's, ``drake_skill.station.config``):
 
 from __future__ import annotations
 
+import dataclasses as dc
+
 import numpy as np
 from pydrake.geometry import (
     AddContactMaterial,
@@ -68,6 +70,7 @@ from pydrake.common.value import AbstractValue, Value
 from drake_skill.station.controller import X_FLANGE_HAND, X_HAND_TCP, EndEffectorController, make_finger_limiter
 from drake_skill.station.models import add_package_paths, model_url
 from drake_skill.station.config import StationConfig, validate_station_config
+from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor
 
 # Per object kind: SDF file, base body, articulated joint.
 _OBJECTS = {
@@ -114,6 +117,113 @@ class _FramePose(LeafSystem):
         output.set_value(X_WB @ self._X_BE)
 
 
+@dc.dataclass
+class ScenePlant:
+    """What :func:`add_scene_plant` added: the plant, its SceneGraph, the model
+    instances, the object's locked base body and articulated joint, and the
+    indices of the robot's bodies."""
+
+    plant: MultibodyPlant
+    scene_graph: object
+    panda: object
+    hand: object
+    object_instance: object
+    object_base: object
+    object_joint: object
+    robot_bodies: set
+
+
+def nominal_object_pose(config: StationConfig) -> RigidTransform:
+    """X_WO of the object's base at the scenario's nominal place on the table."""
+    o = config.object
+    return RigidTransform(RollPitchYaw(0.0, 0.0, o.yaw), [o.x, o.y, 0.0])
+
+
+def add_scene_plant(builder: DiagramBuilder, config: StationConfig) -> ScenePlant:
+    """Adds the scenario's MultibodyPlant (``config.plant``) and SceneGraph to ``builder``:
+    Panda + hand + table + object, every surface's contact parameters, the
+    joints' PD gains (SAP's implicit joint impedance), the object joint's
+    damping and Coulomb friction, the defaults (``q_home``, the gripper's home
+    opening, the object at its nominal pose and initial joint value), the
+    robot's self-collisions filtered. Finalised; nothing is connected.
+
+    The station adds its controllers around it; ``drake-skill bench rollout``'s
+    bare plant holds its actuators at the home positions with nothing else.
+    """
+    plant, scene_graph = AddMultibodyPlant(config.plant, builder)
+    parser = Parser(plant)
+    add_package_paths(parser.package_map())
+    arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
+    hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
+    table = parser.AddModels(url=model_url("table.sdf"))[0]
+    sdf, base_name, joint_name = _OBJECTS[config.object.kind]
+    obj = parser.AddModels(url=model_url(sdf))[0]
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
+    plant.WeldFrames(plant.GetFrameByName("panda_link8", arm),
+                     plant.GetFrameByName("panda_hand", hand), X_FLANGE_HAND)
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
+    plant.set_gravity_enabled(obj, bool(config.object.gravity))
+    object_base = plant.GetBodyByName(base_name, obj)
+    object_joint = plant.GetJointByName(joint_name, obj)
+    plant.SetDefaultFloatingBaseBodyPose(object_base, nominal_object_pose(config))
+    object_joint.set_default_damping(config.object.joint_damping)
+    _set_contact_properties(plant, scene_graph, config.contact)
+
+    ctrl = config.controller
+    for i in range(7):
+        actuator = plant.GetJointActuatorByName(f"panda_joint{i + 1}", arm)
+        actuator.set_controller_gains(PdControllerGains(p=ctrl.kp[i], d=ctrl.kd[i]))
+    for side in ("left", "right"):
+        actuator = plant.GetJointActuatorByName(f"panda_finger_joint_{side}", hand)
+        actuator.set_controller_gains(PdControllerGains(p=ctrl.finger_kp, d=ctrl.finger_kd))
+    # Coulomb friction of the object's joint: zero stiffness, damping
+    # joint_friction_gain, force clamped to joint_friction (SAP's PD clamp).
+    friction = plant.AddJointActuator(f"{joint_name}_friction", object_joint,
+                                      effort_limit=max(config.object.joint_friction, 1e-9))
+    friction.set_controller_gains(PdControllerGains(p=0.0, d=config.object.joint_friction_gain))
+    plant.Finalize()
+
+    plant.SetDefaultPositions(arm, np.asarray(config.q_home, dtype=float))
+    plant.SetDefaultPositions(hand, [config.gripper_home / 2] * 2)
+    if config.object.kind == "box":
+        object_joint.set_default_angle(config.object.initial_joint)
+    else:
+        object_joint.set_default_translation(config.object.initial_joint)
+
+    # Robot-internal collisions cannot happen with the IK limits in force
+    # (and the model has no overlapping robot geometry at q_home, tested);
+    # filtering them saves contact queries every step.
+    robot_bodies = {int(b) for instance in (arm, hand) for b in plant.GetBodyIndices(instance)}
+    robot_geoms = []
+    for body_index in sorted(robot_bodies):
+        robot_geoms += plant.GetCollisionGeometriesForBody(plant.get_body(BodyIndex(body_index)))
+    scene_graph.collision_filter_manager().Apply(
+        CollisionFilterDeclaration().ExcludeWithin(GeometrySet(robot_geoms)))
+    return ScenePlant(plant, scene_graph, arm, hand, obj, object_base, object_joint, robot_bodies)
+
+
+def _set_contact_properties(plant, scene_graph, contact) -> None:
+    """Replaces every collision geometry's proximity properties with its surface's (``contact``)."""
+    inspector = scene_graph.model_inspector()
+    for body_index in range(plant.num_bodies()):
+        body = plant.get_body(BodyIndex(body_index))
+        for gid in plant.GetCollisionGeometriesForBody(body):
+            name = inspector.GetName(gid)
+            surface = "arm" if body.name().startswith("panda_link") else None
+            for body_name, fragment, candidate in _SURFACES:
+                if body.name() == body_name and fragment in name:
+                    surface = candidate
+                    break
+            if surface is None:
+                raise AssertionError(f"no contact surface for geometry {name} of body {body.name()}")
+            s = getattr(contact, surface)
+            props = ProximityProperties()
+            AddContactMaterial(point_stiffness=s.stiffness, friction=CoulombFriction(s.friction, s.friction),
+                               properties=props)
+            props.AddProperty("material", "relaxation_time", s.relaxation_time)
+            scene_graph.AssignRole(plant.get_source_id(), gid, props, RoleAssign.kReplace)
+
+
 class Station(Diagram):
     """The simulated station (see the module docstring for its ports).
 
@@ -127,59 +237,18 @@ class Station(Diagram):
         super().__init__()
         self.config = validate_station_config(config)
         builder = DiagramBuilder()
-        plant, scene_graph = AddMultibodyPlant(config.plant, builder)
+        scene = add_scene_plant(builder, config)
+        plant, scene_graph = scene.plant, scene.scene_graph
         self.plant, self.scene_graph = plant, scene_graph
-        parser = Parser(plant)
-        add_package_paths(parser.package_map())
-
-        arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
-        hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
-        table = parser.AddModels(url=model_url("table.sdf"))[0]
-        sdf, base_name, joint_name = _OBJECTS[config.object.kind]
-        obj = parser.AddModels(url=model_url(sdf))[0]
-        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
-        plant.WeldFrames(plant.GetFrameByName("panda_link8", arm),
-                         plant.GetFrameByName("panda_hand", hand), X_FLANGE_HAND)
-        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
-        plant.set_gravity_enabled(obj, bool(config.object.gravity))
+        arm, hand, obj = scene.panda, scene.hand, scene.object_instance
         self.panda, self.hand, self.object_instance = arm, hand, obj
-        self.object_base = plant.GetBodyByName(base_name, obj)
-        self.object_joint = plant.GetJointByName(joint_name, obj)
-        plant.SetDefaultFloatingBaseBodyPose(self.object_base, self.nominal_object_pose())
-        self.object_joint.set_default_damping(config.object.joint_damping)
-        self._set_contact_properties()
-
-        ctrl = config.controller
-        for i in range(7):
-            actuator = plant.GetJointActuatorByName(f"panda_joint{i + 1}", arm)
-            actuator.set_controller_gains(PdControllerGains(p=ctrl.kp[i], d=ctrl.kd[i]))
-        for side in ("left", "right"):
-            actuator = plant.GetJointActuatorByName(f"panda_finger_joint_{side}", hand)
-            actuator.set_controller_gains(PdControllerGains(p=ctrl.finger_kp, d=ctrl.finger_kd))
-        # Coulomb friction of the object's joint: zero stiffness, damping
-        # joint_friction_gain, force clamped to joint_friction (SAP's PD clamp).
-        friction = plant.AddJointActuator(f"{joint_name}_friction", self.object_joint,
-                                          effort_limit=max(config.object.joint_friction, 1e-9))
-        friction.set_controller_gains(PdControllerGains(p=0.0, d=config.object.joint_friction_gain))
-        plant.Finalize()
-
+        self.object_base, self.object_joint = scene.object_base, scene.object_joint
+        self.robot_bodies = scene.robot_bodies
         q_home = np.asarray(config.q_home, dtype=float)
-        plant.SetDefaultPositions(arm, q_home)
-        plant.SetDefaultPositions(hand, [config.gripper_home / 2] * 2)
-        self._set_default_object_joint(config.object.initial_joint)
-
-        # Robot-internal collisions cannot happen with the IK limits in force
-        # (and the model has no overlapping robot geometry at q_home, tested);
-        # filtering them saves contact queries every step.
-        self.robot_bodies = {int(b) for instance in (arm, hand) for b in plant.GetBodyIndices(instance)}
-        robot_geoms = []
-        for body_index in sorted(self.robot_bodies):
-            robot_geoms += plant.GetCollisionGeometriesForBody(plant.get_body(BodyIndex(body_index)))
-        scene_graph.collision_filter_manager().Apply(
-            CollisionFilterDeclaration().ExcludeWithin(GeometrySet(robot_geoms)))
+        ctrl = config.controller
 
         # Hand pose in, rate-limited joint impedance set points out.
-        controller = builder.AddNamedSystem("ee_controller", EndEffectorController(ctrl, q_home))
+        controller = builder.AddNamedSystem("ee_controller", EndEffectorController(ctrl, q_home, config.time_step))
         self.ee_controller = controller
         builder.Connect(controller.GetOutputPort("panda_state_desired"),
                         plant.get_desired_state_input_port(arm))
@@ -187,7 +256,7 @@ class Station(Diagram):
         builder.ExportOutput(controller.GetOutputPort("joint_acceleration_commanded"),
                              "joint_acceleration_commanded")
         # Opening w -> each finger at w/2, at most the hand's finger speed.
-        gripper = builder.AddNamedSystem("gripper", make_finger_limiter(ctrl))
+        gripper = builder.AddNamedSystem("gripper", make_finger_limiter(ctrl, config.time_step))
         self.gripper = gripper
         builder.Connect(gripper.GetOutputPort("finger_state_desired"), plant.get_desired_state_input_port(hand))
         builder.ExportInput(gripper.GetInputPort("opening"), "gripper_command")
@@ -224,6 +293,12 @@ class Station(Diagram):
         builder.ExportOutput(object_state.get_output_port(), "object_state")
         builder.ExportOutput(plant.get_contact_results_output_port(), "contact_results")
         builder.ExportOutput(plant.get_generalized_contact_forces_output_port(arm), "external_torque")
+        # The collision reflex, updated at every plant step (the contact results change only then).
+        contact_force = builder.AddNamedSystem("robot_scene_contact", RobotSceneContactForce(self.robot_bodies))
+        builder.Connect(plant.get_contact_results_output_port(), contact_force.get_input_port())
+        self.reflex_monitor = add_reflex_monitor(builder, contact_force.get_output_port(),
+                                                 plant.get_generalized_contact_forces_output_port(arm),
+                                                 config.reflex, config.time_step)
 
         if config.enable_camera:
             self._add_camera(builder)
@@ -232,46 +307,15 @@ class Station(Diagram):
                                            MeshcatVisualizerParams(role=Role.kIllustration))
         builder.BuildInto(self)
         self.set_name("station")
-        # Looked up once: the reflex monitor reads them after every plant step.
-        self._contact_results_port = self.GetOutputPort("contact_results")
-        self._external_torque_port = self.GetOutputPort("external_torque")
-
-    def _set_contact_properties(self) -> None:
-        """Replaces every collision geometry's proximity properties with its surface's."""
-        plant, contact = self.plant, self.config.contact
-        inspector = self.scene_graph.model_inspector()
-        for body_index in range(plant.num_bodies()):
-            body = plant.get_body(BodyIndex(body_index))
-            for gid in plant.GetCollisionGeometriesForBody(body):
-                name = inspector.GetName(gid)
-                surface = "arm" if body.name().startswith("panda_link") else None
-                for body_name, fragment, candidate in _SURFACES:
-                    if body.name() == body_name and fragment in name:
-                        surface = candidate
-                        break
-                if surface is None:
-                    raise AssertionError(f"no contact surface for geometry {name} of body {body.name()}")
-                s = getattr(contact, surface)
-                props = ProximityProperties()
-                AddContactMaterial(point_stiffness=s.stiffness, friction=CoulombFriction(s.friction, s.friction),
-                                   properties=props)
-                props.AddProperty("material", "relaxation_time", s.relaxation_time)
-                self.scene_graph.AssignRole(plant.get_source_id(), gid, props, RoleAssign.kReplace)
 
     def robot_scene_contact(self, context) -> tuple[float, np.ndarray]:
         """(sum of the robot-scene contact force magnitudes [N], external joint
         torques of joints 1..7 [N m]) at the state in ``context`` (a root context
-        containing this station)."""
-        ctx = self.GetMyContextFromRoot(context)
-        results = self._contact_results_port.Eval(ctx)
-        force = 0.0
-        robot = self.robot_bodies
-        for i in range(results.num_point_pair_contacts()):
-            info = results.point_pair_contact_info(i)
-            if (int(info.bodyA_index()) in robot) != (int(info.bodyB_index()) in robot):
-                force += float(np.linalg.norm(info.contact_force()))
-        tau = self._external_torque_port.Eval(ctx)
-        return force, tau
+        containing this station): the reflex monitor's inputs."""
+        monitor = self.reflex_monitor
+        ctx = monitor.GetMyContextFromRoot(context)
+        force = float(monitor.GetInputPort("contact_force").Eval(ctx)[0])
+        return force, np.asarray(monitor.GetInputPort("external_torque").Eval(ctx), dtype=float)
 
     # ------------------------------------------------------------------ camera
     def _add_camera(self, builder) -> None:
@@ -320,8 +364,7 @@ class Station(Diagram):
 
     # ------------------------------------------------------------------ object
     def nominal_object_pose(self) -> RigidTransform:
-        o = self.config.object
-        return RigidTransform(RollPitchYaw(0.0, 0.0, o.yaw), [o.x, o.y, 0.0])
+        return nominal_object_pose(self.config)
 
     def random_object_pose(self, seed: int) -> RigidTransform:
         """The nominal pose perturbed uniformly by the configured translation and yaw noise."""
@@ -330,12 +373,6 @@ class Station(Diagram):
         dx, dy = rng.uniform(-o.randomize_xy, o.randomize_xy, size=2)
         dyaw = rng.uniform(-o.randomize_yaw, o.randomize_yaw)
         return RigidTransform(RollPitchYaw(0.0, 0.0, o.yaw + dyaw), [o.x + dx, o.y + dy, 0.0])
-
-    def _set_default_object_joint(self, value: float) -> None:
-        if self.config.object.kind == "box":
-            self.object_joint.set_default_angle(value)
-        else:
-            self.object_joint.set_default_translation(value)
 
     def set_object_pose(self, context, X_WO: RigidTransform) -> None:
         """Places the object's base frame O at X_WO and locks it there."""
@@ -367,6 +404,7 @@ class Station(Diagram):
         self.set_object_pose(context, X_WO)
         self.ee_controller.set_joint_positions(context, self.config.q_home)
         self.gripper.set_opening(context, self.config.gripper_home)
+        self.reflex_monitor.start(self.reflex_monitor.GetMyMutableContextFromRoot(context))
         return X_WO
 
 

@@ -346,6 +346,11 @@ def validate_station_config(config: StationConfig) -> StationConfig:
     _number("controller.limiter_period", ctrl.limiter_period, 1e-4, ctrl.diff_ik_period, what="a period [s]")
     _number("controller.limiter_bandwidth", ctrl.limiter_bandwidth, 0.0, 0.5 / ctrl.limiter_period,
             lo_open=True, what="a bandwidth [rad/s] below half the limiter rate")
+    # The limiters step at the plant's rate, k limiter periods per plant step (RateLimiter).
+    steps = config.time_step / ctrl.limiter_period
+    if abs(steps - round(steps)) > 1e-9 * steps or round(steps) < 1:
+        _bad("controller.limiter_period", ctrl.limiter_period,
+             f"a period that divides plant.time_step = {config.time_step} s (e.g. 0.001)")
 
     ref = config.reflex
     _number("reflex.contact_force_max", ref.contact_force_max, 0.0, 1e4, lo_open=True, what="a force [N]")

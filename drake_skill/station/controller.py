@@ -135,12 +135,29 @@ class RateLimiter(LeafSystem):
     yields only where the acceleration or velocity bound cuts in. State (discrete, per run): [q_c,
     v_c, a, r_prev, r_dot]. ``reference_scale`` multiplies the reference (a
     finger opening -> each finger's position) and ``lower``/``upper`` clip it.
+
+    ``update_period`` (default ``period``) is how often the system's discrete
+    update runs: an integer number k of periods, each update taking the k
+    steps above in turn with the reference read at the update. In a station
+    whose plant reads the command every k periods (``update_period`` = the
+    plant's step), the plant sees the state of every k-th step as before,
+    with one Python callback (and one simulator step) per plant step instead
+    of k; the reference is then held for the k steps, which differs from
+    reading it every period only in the steps after a change of the
+    reference inside an update (differential IK's output, every 10 ms: a
+    1 ms delay at a 2 ms plant step; ``tools/check_physics.py`` checks it).
     """
 
     def __init__(self, n: int, period: float, bandwidth: float, v_max, a_max, j_max,
-                 reference_period: float, reference_scale: float = 1.0, lower=None, upper=None):
+                 reference_period: float, reference_scale: float = 1.0, lower=None, upper=None,
+                 update_period: float | None = None):
         super().__init__()
         self._n, h, w = int(n), float(period), float(bandwidth)
+        update = h if update_period is None else float(update_period)
+        self._substeps = int(round(update / h))
+        if self._substeps < 1 or abs(self._substeps * h - update) > 1e-9 * update:
+            raise ValueError(f"RateLimiter: update_period = {update} s must be a whole number of "
+                             f"periods ({h} s); set controller.limiter_period to divide the plant's time_step")
 
         def per_joint(value) -> list:
             return np.broadcast_to(np.asarray(value, dtype=float), (self._n,)).tolist()
@@ -154,7 +171,7 @@ class RateLimiter(LeafSystem):
         self._upper = None if upper is None else per_joint(upper)
         self._ref = self.DeclareVectorInputPort("reference", n)
         self._x = self.DeclareDiscreteState(5 * n)
-        self.DeclarePeriodicDiscreteUpdateEvent(h, 0.0, self._update)
+        self.DeclarePeriodicDiscreteUpdateEvent(self._substeps * h, 0.0, self._update)
         self.DeclareVectorOutputPort("state", 2 * n, self._calc_state, {self.xd_ticket()})
         self.DeclareVectorOutputPort("acceleration", n, self._calc_accel, {self.xd_ticket()})
 
@@ -176,7 +193,9 @@ class RateLimiter(LeafSystem):
         if self._lower is not None:
             r = [lo if ri < lo else ri for ri, lo in zip(r, self._lower)]   # np.maximum(r, lower)
             r = [hi if ri > hi else ri for ri, hi in zip(r, self._upper)]   # np.minimum(r, upper)
-        discrete_state.set_value(self._x, limiter_step(x, r, self._consts))
+        for _ in range(self._substeps):
+            x = limiter_step(x, r, self._consts)
+        discrete_state.set_value(self._x, x)
 
     def _calc_state(self, context, output: BasicVector):
         x = context.get_discrete_state(self._x).value()
@@ -187,14 +206,15 @@ class RateLimiter(LeafSystem):
         output.SetFromVector(x[2 * self._n:3 * self._n])
 
 
-def make_finger_limiter(config: ControllerConfig) -> RateLimiter:
+def make_finger_limiter(config: ControllerConfig, update_period: float | None = None) -> RateLimiter:
     """Opening w [m] in -> both fingers' commanded [q, q, v, v] out, each at w / 2
-    within its travel, at most ``limits.FINGER_SPEED_MAX``."""
-    return _FingerLimiter(config)
+    within its travel, at most ``limits.FINGER_SPEED_MAX``; ``update_period`` as
+    :class:`RateLimiter`'s."""
+    return _FingerLimiter(config, update_period)
 
 
 class _FingerLimiter(Diagram):
-    def __init__(self, config: ControllerConfig):
+    def __init__(self, config: ControllerConfig, update_period: float | None = None):
         super().__init__()
         from pydrake.systems.primitives import MatrixGain
 
@@ -203,7 +223,7 @@ class _FingerLimiter(Diagram):
         limiter = builder.AddNamedSystem("limiter", RateLimiter(
             2, config.limiter_period, config.limiter_bandwidth, limits.FINGER_SPEED_MAX,
             FINGER_ACCEL_MAX, 100.0 * FINGER_ACCEL_MAX, config.diff_ik_period, reference_scale=0.5,
-            lower=0.0, upper=limits.FINGER_MAX))
+            lower=0.0, upper=limits.FINGER_MAX, update_period=update_period))
         builder.Connect(split.get_output_port(), limiter.get_input_port())
         builder.ExportInput(split.get_input_port(), "opening")
         builder.ExportOutput(limiter.GetOutputPort("state"), "finger_state_desired")
@@ -223,10 +243,11 @@ class EndEffectorController(Diagram):
     limits are Franka's scaled by ``config.velocity_scale``; the hand's
     translational speed is limited to ``config.ee_speed_max`` m/s; the
     commanded joint motion passes the :class:`RateLimiter` at Franka's
-    velocity, acceleration and jerk limits.
+    velocity, acceleration and jerk limits (updated every ``update_period``,
+    see :class:`RateLimiter`).
     """
 
-    def __init__(self, config: ControllerConfig, q_home):
+    def __init__(self, config: ControllerConfig, q_home, update_period: float | None = None):
         super().__init__()
         builder = DiagramBuilder()
         self.control_plant = make_control_plant()
@@ -253,7 +274,7 @@ class EndEffectorController(Diagram):
             plant, plant.world_frame(), plant.GetFrameByName("ee"), config.diff_ik_period, params, context, True))
         self._limiter = builder.AddNamedSystem("rate_limiter", RateLimiter(
             7, config.limiter_period, config.limiter_bandwidth, limits.QD_MAX, limits.QDD_MAX,
-            limits.QDDD_MAX, config.diff_ik_period))
+            limits.QDDD_MAX, config.diff_ik_period, update_period=update_period))
         builder.Connect(self._diff_ik.GetOutputPort("joint_positions"), self._limiter.get_input_port())
         builder.ExportInput(self._diff_ik.GetInputPort("X_AE_desired"), "X_WE_desired")
         builder.ExportOutput(self._limiter.GetOutputPort("state"), "panda_state_desired")

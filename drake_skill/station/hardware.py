@@ -78,6 +78,7 @@ from drake_skill.station import simulation as _simulation
 from drake_skill.station.builder import Station
 from drake_skill.station.controller import EndEffectorController, make_control_plant
 from drake_skill.station.hardware_config import HardwareConfig, validate_hardware_config
+from drake_skill.station.reflex import add_reflex_monitor
 
 N_JOINTS = 7
 #: Period of the status monitor's checks [s]: a stale status is caught at
@@ -511,6 +512,12 @@ class HardwareStation(Diagram):
             AbstractValue.Make(ContactResults())))
         builder.ExportOutput(no_contact.get_output_port(), "contact_results")
         builder.ExportOutput(receiver.get_torque_external_output_port(), "external_torque")
+        # The simulated station's reflex on what the robot measures: the external joint
+        # torques (the Panda does not measure the contact force: 0).
+        zero_force = builder.AddNamedSystem("robot_scene_contact", ConstantVectorSource([0.0]))
+        self.reflex_monitor = add_reflex_monitor(builder, zero_force.get_output_port(),
+                                                 receiver.get_torque_external_output_port(),
+                                                 self.config.reflex, STATUS_CHECK_PERIOD)
         builder.ExportOutput(controller.GetOutputPort("joint_acceleration_commanded"),
                              "joint_acceleration_commanded")
         self.placed_pose = builder.AddNamedSystem("placed_object_pose", PlacedObjectPose())
@@ -683,6 +690,7 @@ class HardwareStation(Diagram):
         q = self.GetOutputPort("panda_state").Eval(station_context)[:N_JOINTS]
         self.ee_controller.set_joint_positions(context, q)
         self.monitor.mark_fresh(self.monitor.GetMyMutableContextFromRoot(context))
+        self.reflex_monitor.start(self.reflex_monitor.GetMyMutableContextFromRoot(context))
         self.placed_pose.set_pose(self.placed_pose.GetMyMutableContextFromRoot(context), X_WO)
         return X_WO
 

@@ -28,6 +28,7 @@ lives in one thread). The ground truth stays here:
 
 from __future__ import annotations
 
+import copy
 import threading
 import time
 
@@ -137,9 +138,10 @@ _BUILD_LOCK = threading.Lock()
 
 class _JointSetPoints(Diagram):
     """Stands in for the station's end-effector controller: input ``X_WE_desired``
-    is the joint set point [q, v] (14) itself, passed to ``panda_state_desired``."""
+    is the joint set point [q, v] (14) itself, passed to ``panda_state_desired``
+    (``update_period``, the controller's limiter update, does not apply)."""
 
-    def __init__(self, config, q_home):
+    def __init__(self, config, q_home, update_period=None):
         super().__init__()
         from pydrake.systems.primitives import PassThrough
 
@@ -208,7 +210,11 @@ class SimRobot:
                  pump: bool = True, meshcat=None, expire_sec: float = 0.1, guide: str | None = None):
         self.config = validate_hardware_config(config if config is not None else HardwareConfig())
         self.lcm = lcm if lcm is not None else DrakeLcm(self.config.lcm_url)
-        station_config = self.config.station
+        # The reflex is the driver side's: the hardware station's monitor decides it from the
+        # external torques this robot reports (as on the Panda); its own station's monitor
+        # would stop this simulation instead and leave the driver without status.
+        station_config = copy.deepcopy(self.config.station)
+        station_config.reflex.enabled = False
         step = float(station_config.time_step)
         builder = DiagramBuilder()
         self.station = builder.AddNamedSystem("station", _joint_command_station(station_config, meshcat))

@@ -33,13 +33,16 @@ import math
 
 import numpy as np
 from pydrake.math import RigidTransform
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder, EventStatus
+from pydrake.systems.analysis import Simulator, SimulatorStatus
+from pydrake.systems.framework import DiagramBuilder
 
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
 from drake_skill.station.builder import Station, build_station
 from drake_skill.station.config import StationConfig
 from drake_skill.station.success import judge_run, judge_success
+
+
+_TERMINATED = SimulatorStatus.ReturnReason.kReachedTerminationCondition
 
 
 def pose_to_vector(X: RigidTransform) -> np.ndarray:
@@ -121,8 +124,11 @@ class StationRecorder:
     exact time and processes the pending events, which refreshes the
     segmenter's memory with the scene at that instant.
 
-    Every simulator step is watched (a simulator monitor): the robot-scene
-    contact force and the external joint torques against ``config.reflex``.
+    The collision reflex is the station's own system
+    (:class:`~drake_skill.station.reflex.ReflexMonitor`, updated at every plant
+    step): when it trips, the simulator returns at that instant and the
+    recorder raises :class:`ReflexError` from the monitor's state. A sample's
+    ``force`` is the monitor's peak filtered force over the interval ending at it.
     """
 
     def __init__(self, station: Station, root_context, simulator, record_hz: float = 100.0,
@@ -150,6 +156,8 @@ class StationRecorder:
         self._frame_period = None if frame_hz is None else 1.0 / self.frame_hz
         self._ports = {name: station.GetOutputPort(name)
                        for name in ("ee_pose", "panda_state", "object_state")}
+        self._monitor = station.reflex_monitor
+        self._monitor_context = self._monitor.GetMyMutableContextFromRoot(root_context)
         self.reset()
 
     def reset(self) -> None:
@@ -158,8 +166,6 @@ class StationRecorder:
         self.X_WO_perceived, self.X_WO_frame = None, None
         self._t0 = None
         self._last_peak = 0.0
-        self._filtered = np.zeros(9)
-        self._filtered[8] = self.root_context.get_time()
         self._n = 0
 
     # ------------------------------------------------------------------ grid
@@ -193,44 +199,14 @@ class StationRecorder:
 
     # ---------------------------------------------------------------- stepping
     def _advance(self, t: float, pending: bool) -> None:
-        station, reflex = self.station, self.station.config.reflex
-        tau_max = np.asarray(reflex.external_torque_max, dtype=float)
-        tripped = []
-        peak = [0.0]
-        filt = self._filtered          # [force, tau (7), time of the last update]
-
-        # Called after every plant step (1 kHz) in Python: scalars stay Python
-        # floats and the torque filter one numpy array (filt_tau, a view).
-        filter_time, force_max, enabled = reflex.filter_time, reflex.contact_force_max, reflex.enabled
-        filt_tau = filt[1:8]
-        succeeded = EventStatus.Succeeded()
-
-        def monitor(root_context):
-            force, tau = station.robot_scene_contact(root_context)
-            now = root_context.get_time()
-            # The robot's reflex acts on its filtered estimate of the external
-            # wrench and torques: first-order low-pass, time constant filter_time.
-            dt = max(now - filt[8], 0.0)
-            alpha = 1.0 if filter_time <= 0 else 1.0 - math.exp(-dt / filter_time)
-            f = float(filt[0])
-            f += alpha * (force - f)
-            filt[0] = f
-            np.add(filt_tau, alpha * (tau - filt_tau), out=filt_tau)
-            filt[8] = now
-            if f > peak[0]:
-                peak[0] = f
-            if enabled:
-                over = np.abs(filt_tau) > tau_max
-                if f > force_max or over.any():
-                    cause = "force" if f > force_max else f"torque joint {int(np.argmax(over)) + 1}"
-                    tripped.append(ReflexError(now, f, filt_tau, cause))
-                    return EventStatus.ReachedTermination(station, "collision reflex")
-            return succeeded
-
-        self.simulator.set_monitor(monitor)
+        """Advances to t (and, with ``pending``, handles the events due at t); raises
+        :class:`ReflexError` when the station's reflex monitor stopped the simulator,
+        :class:`SolverError` when SAP failed."""
         try:
+            status = None
             if t > self.root_context.get_time():
-                self.simulator.AdvanceTo(t)
+                status = self.simulator.AdvanceTo(t)
+            tripped = status is not None and status.reason() == _TERMINATED
             if pending and not tripped:
                 self.simulator.AdvancePendingEvents()
         except RuntimeError as e:
@@ -239,11 +215,14 @@ class StationRecorder:
                 raise SolverError(f"the contact solver failed to converge at t = {time_s:.3f} s: {e}",
                                   time_s) from e
             raise
-        finally:
-            self.simulator.clear_monitor()
         if tripped:
-            raise tripped[0]
-        self._last_peak = peak[0]     # over this interval (0 when no step was taken)
+            trip = self._monitor.trip(self._monitor_context)
+            if trip is None:     # another system ended the simulation
+                raise RuntimeError(f"the simulation ended at t = {status.return_time():.3f} s: "
+                                   f"{status.FormatMessage()}")
+            raise ReflexError(*trip)
+        # The peak filtered force over this interval (the reflex monitor's, ReflexMonitor.take_peak).
+        self._last_peak = self._monitor.take_peak(self._monitor_context)
 
     def sample(self, gripper_command: float = math.nan) -> None:
         """Advances to the next grid time and records it (frames included)."""
@@ -262,13 +241,12 @@ class StationRecorder:
             raise DivergedError(
                 f"simulation diverged at t = {t:.3f} s (joint state {np.round(state, 3)}); "
                 "check the commanded poses and the plant time_step", t)
-        force_now = float(self._filtered[0])
         self.times.append(t)
         self.X_WE.append(pose_to_vector(self._ports["ee_pose"].Eval(self.context)))
         self.q.append(state[:7].copy())
         self.obj.append(float(self._ports["object_state"].Eval(self.context)[0]))
         self.grip.append(float(gripper_command))
-        self.force.append(max(float(self._last_peak), force_now))
+        self.force.append(float(self._last_peak))
         self._n += 1
 
     def _perceive(self, frame_index: int) -> None:

@@ -1,0 +1,166 @@
+"""The collision reflex as a system of the station diagram.
+
+The Panda stops itself when its estimate of the external wrench or of an
+external joint torque exceeds a threshold (Franka's collision behaviour; the
+thresholds are the scenario's ``reflex``, ``drake_skill.station.limits``
+gives their sources). :class:`ReflexMonitor` does the same on the station's
+measurements, in simulation and on the robot alike:
+
+    f_hat  <- f_hat  + alpha (f   - f_hat),        alpha = 1 - exp(-dt / T_f)
+    tau_hat <- tau_hat + alpha (tau - tau_hat)
+
+a first-order low-pass (time constant ``filter_time`` T_f [s], dt the time
+since the last update [s]) of the robot-scene contact force f [N] and the
+external joint torques tau [N m]; the reflex trips when f_hat >
+``contact_force_max`` or any |tau_hat_i| > ``external_torque_max[i]``.
+
+Every value of a run lives in the Context: the thresholds in a numeric
+parameter, the filter, the time of its last update and the peak of f_hat
+since the recorder last took it in discrete state. The update runs every
+``period`` s (the plant's step in simulation: the contact results change
+only then) and, when the reflex trips, returns a termination status: the
+simulator's ``AdvanceTo`` returns at that instant and
+``drake_skill.station.simulation.StationRecorder`` raises
+:class:`~drake_skill.station.simulation.ReflexError` from the state.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
+
+__all__ = ["ReflexMonitor", "ReflexTrip", "RobotSceneContactForce", "add_reflex_monitor", "reflex_filter_step"]
+
+N_JOINTS = 7
+# Discrete state layout: [f_hat, tau_hat (7), time of the last update, peak f_hat].
+_F, _TAU, _T, _PEAK = 0, slice(1, 1 + N_JOINTS), 1 + N_JOINTS, 2 + N_JOINTS
+_STATE_SIZE = 3 + N_JOINTS
+# Parameter layout: [enabled, contact_force_max, filter_time, external_torque_max (7)].
+_PARAM_SIZE = 3 + N_JOINTS
+
+
+class ReflexTrip(NamedTuple):
+    """Why the reflex tripped: ``time_s`` [s], filtered ``force_N`` and ``torque_Nm`` (7), and
+    ``cause`` ("force" or "torque joint i", i from 1)."""
+
+    time_s: float
+    force_N: float
+    torque_Nm: np.ndarray
+    cause: str
+
+
+def reflex_filter_step(x: np.ndarray, force: float, tau, now: float, params: np.ndarray):
+    """One update of the module docstring's filter and test (pure numpy).
+
+    x: the state [f_hat, tau_hat (7), t_last, peak]; force [N]; tau (7) [N m];
+    now [s]; params: [enabled, contact_force_max, filter_time, tau_max (7)].
+    Returns (next state, :class:`ReflexTrip` or None).
+    """
+    x = np.array(x, dtype=float)
+    filter_time = float(params[2])
+    dt = max(now - x[_T], 0.0)
+    alpha = 1.0 if filter_time <= 0 else 1.0 - math.exp(-dt / filter_time)
+    x[_F] += alpha * (float(force) - x[_F])
+    x[_TAU] += alpha * (np.asarray(tau, dtype=float) - x[_TAU])
+    x[_T] = now
+    x[_PEAK] = max(x[_PEAK], x[_F])
+    if params[0] < 0.5:
+        return x, None
+    over = np.abs(x[_TAU]) > params[3:]
+    if x[_F] > params[1] or over.any():
+        cause = "force" if x[_F] > params[1] else f"torque joint {int(np.argmax(over)) + 1}"
+        return x, ReflexTrip(now, float(x[_F]), x[_TAU].copy(), cause)
+    return x, None
+
+
+class ReflexMonitor(LeafSystem):
+    """Inputs ``contact_force`` [1] (robot-scene contact force [N]) and ``external_torque``
+    [7] [N m]; output ``filtered`` [9]: [f_hat, tau_hat (7), peak f_hat] as of the last
+    update. The module docstring gives the filter; ``reflex`` is the scenario's
+    ``ReflexConfig`` (the parameter's defaults), ``period`` the update's [s].
+    """
+
+    def __init__(self, reflex, period: float):
+        super().__init__()
+        params = np.r_[float(bool(reflex.enabled)), float(reflex.contact_force_max), float(reflex.filter_time),
+                       np.asarray(reflex.external_torque_max, dtype=float)]
+        if params.shape != (_PARAM_SIZE,):
+            raise ValueError(f"reflex.external_torque_max: expected {N_JOINTS} values, got {params.size - 3}")
+        self._params = self.DeclareNumericParameter(BasicVector(params))
+        self._force = self.DeclareVectorInputPort("contact_force", 1)
+        self._tau = self.DeclareVectorInputPort("external_torque", N_JOINTS)
+        self._state = self.DeclareDiscreteState(_STATE_SIZE)
+        self.DeclarePeriodicDiscreteUpdateEvent(float(period), 0.0, self._update)
+        self.DeclareVectorOutputPort("filtered", 2 + N_JOINTS, self._calc_filtered, {self.xd_ticket()})
+
+    def start(self, context) -> None:
+        """Starts the filter at rest at the context's time (a run's reset)."""
+        x = np.zeros(_STATE_SIZE)
+        x[_T] = context.get_time()
+        context.get_mutable_discrete_state(self._state).SetFromVector(x)
+
+    def take_peak(self, context) -> float:
+        """The peak of f_hat since the last call [N]; starts the next interval at f_hat."""
+        state = context.get_mutable_discrete_state(self._state)
+        x = state.get_value()
+        peak = float(x[_PEAK])
+        state.SetAtIndex(_PEAK, float(x[_F]))
+        return peak
+
+    def trip(self, context) -> ReflexTrip | None:
+        """The trip the state shows (None when the filter is within the thresholds)."""
+        x = context.get_discrete_state(self._state).get_value()
+        params = context.get_numeric_parameter(self._params).get_value()
+        _, trip = reflex_filter_step(x, x[_F], x[_TAU], x[_T], params)
+        return trip
+
+    def _update(self, context, discrete_state):
+        x = context.get_discrete_state(self._state).get_value()
+        params = context.get_numeric_parameter(self._params).get_value()
+        x_next, trip = reflex_filter_step(x, self._force.Eval(context)[0], self._tau.Eval(context),
+                                          context.get_time(), params)
+        discrete_state.set_value(self._state, x_next)
+        if trip is not None:
+            return EventStatus.ReachedTermination(self, f"collision reflex ({trip.cause})")
+        return EventStatus.Succeeded()
+
+    def _calc_filtered(self, context, output):
+        x = context.get_discrete_state(self._state).get_value()
+        output.SetFromVector(np.r_[x[_F], x[_TAU], x[_PEAK]])
+
+
+class RobotSceneContactForce(LeafSystem):
+    """Input ``contact_results`` (the plant's); output ``force`` [1]: the sum of the
+    contact force magnitudes [N] of the point contacts between a robot body
+    (``robot_bodies``, body indices) and anything else."""
+
+    def __init__(self, robot_bodies):
+        super().__init__()
+        from pydrake.multibody.plant import ContactResults
+        from pydrake.common.value import AbstractValue
+
+        self._robot = frozenset(int(b) for b in robot_bodies)
+        self._results = self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
+        self.DeclareVectorOutputPort("force", 1, self._calc, {self._results.ticket()})
+
+    def _calc(self, context, output):
+        results = self._results.Eval(context)
+        robot, force = self._robot, 0.0
+        for i in range(results.num_point_pair_contacts()):
+            info = results.point_pair_contact_info(i)
+            if (int(info.bodyA_index()) in robot) != (int(info.bodyB_index()) in robot):
+                force += float(np.linalg.norm(info.contact_force()))
+        output.SetAtIndex(0, force)
+
+
+def add_reflex_monitor(builder, contact_force_port, external_torque_port, reflex, period: float) -> ReflexMonitor:
+    """Adds a :class:`ReflexMonitor` named "reflex" fed by the two ports and exports its
+    ``filtered`` output as ``reflex_state`` (the station contract); returns it."""
+    monitor = builder.AddNamedSystem("reflex", ReflexMonitor(reflex, period))
+    builder.Connect(contact_force_port, monitor.GetInputPort("contact_force"))
+    builder.Connect(external_torque_port, monitor.GetInputPort("external_torque"))
+    builder.ExportOutput(monitor.GetOutputPort("filtered"), "reflex_state")
+    return monitor
