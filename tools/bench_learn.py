@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Learning-run wall time with 1 and 2 workers; see drake_skill/bench/learn.py."""
+"""Learning-run wall time on 1 worker and the default; see drake_skill/bench/learn.py."""
 import sys
 
 from drake_skill.bench.learn import main

@@ -1,6 +1,6 @@
 """``drake-skill evaluate``: greedy success of a skill over held-out object poses.
 
-    drake-skill evaluate --skill DIR [--poses 10] [--seed0 900000] [--workers 1]
+    drake-skill evaluate --skill DIR [--poses 10] [--seed0 900000] [--workers N]
                          [--ground-truth-pose] [--all-demos | --explore N] [--out FILE] [--json]
 
 Executes the skill's policy without exploration (a fitted skill's initial
@@ -40,6 +40,8 @@ HELP = "greedy success of a skill over held-out object poses (table + JSON)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from drake_skill.learning.workers import default_workers
+
     from drake_skill.learning.loop import HELD_OUT_SEED0, exploration_scales_text
 
     parser.description = __doc__
@@ -48,7 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--poses", type=int, default=10, help="held-out object poses (default 10)")
     parser.add_argument("--seed0", type=int, default=HELD_OUT_SEED0,
                         help=f"seed of the first pose (default {HELD_OUT_SEED0}, as drake-skill learn)")
-    parser.add_argument("--workers", type=int, default=1, help="rollout worker processes (default 1)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="rollout worker processes (default: one per CPU this process may use, "
+                             f"{default_workers()} here)")
     parser.add_argument("--ray-address", default=None, help="run on Ray actors of this cluster")
     parser.add_argument("--ground-truth-pose", action="store_true",
                         help="object frame from the simulator's ground truth instead of the segmenter")
@@ -78,6 +82,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.poses < 1:
         raise ValueError(f"--poses must be at least 1, got {args.poses}")
+    if args.workers is None:
+        from drake_skill.learning.workers import default_workers
+
+        args.workers = default_workers()
     if args.workers < 1:
         raise ValueError(f"--workers must be at least 1, got {args.workers}")
     if not args.skill.is_dir():

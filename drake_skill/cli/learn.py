@@ -1,7 +1,7 @@
 """``drake-skill learn``: improve a skill by policy search on its learned reward (the main job).
 
     drake-skill learn [--skill open] [--skill-dir DIR | --demos DIR] [--method pi2-es-cov]
-                      [--reward dense] [--episodes 5] [--rollouts 6] [--seed 0] [--workers 1]
+                      [--reward dense] [--episodes 5] [--rollouts 6] [--seed 0] [--workers N]
                       [--held-out 10] [--out results/learn/SKILL] [--resume] [--meshcat]
 
 The skill comes from ``--skill-dir`` (a fitted skill, ``drake-skill fit``), or
@@ -45,6 +45,7 @@ _METHODS = ("power", "pi2", "pi2-cov", "pi2-es", "pi2-es-cov", "cma-es")
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from drake_skill.learning.loop import exploration_scales_text
+    from drake_skill.learning.workers import default_workers
 
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -71,7 +72,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     search.add_argument("--held-out", type=int, default=10,
                         help="held-out object poses for greedy success before and after (0: off; default 10)")
     run = parser.add_argument_group("run")
-    run.add_argument("--workers", type=int, default=1, help="rollout worker processes (default 1)")
+    run.add_argument("--workers", type=int, default=None,
+                        help="rollout worker processes (default: one per CPU this process may use, "
+                             f"{default_workers()} here)")
     run.add_argument("--ray-address", default=None,
                      help="run rollouts on Ray actors of this cluster ('auto', 'ray://host:port'; "
                           "needs pip install ray)")
@@ -153,6 +156,10 @@ def run(args: argparse.Namespace) -> int:
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.skill import Skill
 
+    if args.workers is None:
+        from drake_skill.learning.workers import default_workers
+
+        args.workers = default_workers()
     for name in ("episodes", "rollouts", "workers"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be at least 1, got {getattr(args, name)}")

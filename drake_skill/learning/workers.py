@@ -48,7 +48,7 @@ import numpy as np
 
 from drake_skill.learning.rollout import RolloutConfig, RolloutResult, RolloutRunner
 
-__all__ = ["ProcessPool", "RayPool", "RunnerSpec", "SerialPool", "make_pool", "ray_available"]
+__all__ = ["ProcessPool", "RayPool", "RunnerSpec", "SerialPool", "default_workers", "make_pool", "ray_available"]
 
 #: Environment of a worker process: one thread per numerical library, so N
 #: workers on N cores do not oversubscribe them; Mesa's software renderer
@@ -380,6 +380,15 @@ class RayPool(_Pool):
         if self._owns_ray:
             self._ray.shutdown()
             self._owns_ray = False
+
+
+def default_workers() -> int:
+    """Rollout workers by default: the CPUs this process may run on
+    (``os.sched_getaffinity``; ``os.cpu_count()`` where that is not available)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:      # not on Linux
+        return max(1, os.cpu_count() or 1)
 
 
 def make_pool(spec: RunnerSpec, workers: int = 1, ray_address: str | None = None, use_ray: bool = False,
