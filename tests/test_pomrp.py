@@ -301,3 +301,29 @@ def test_verdict_is_decided_by_the_last_viterbi_frame(pomrp):
         assert d["final_state"] == term and d["terminal"] and d["success"]
         short = _path_sequence([0] * 10 + [1] * 10 + [2] * 11, 300 + seed)
         assert pomrp.goal_model.decode(short)[-1] != term and not pomrp.verdict(short)
+
+
+def _terminal_can_be_left_pomrp():
+    """3 states on a line (1-D goal data, means 0, 10, 20): 0 -> 1 -> 2, and the terminal
+    state 2 can be left again for 1 (a lid that falls back, a drawer pushed back in)."""
+    P = np.array([[0.9, 0.1, 0.0], [0.0, 0.9, 0.1], [0.0, 0.1, 0.9]])
+    arrays = {"startprob": np.array([1.0, 0.0, 0.0]), "transmat": P, "means": np.array([[0.0], [10.0], [20.0]]),
+              "covars": np.full((3, 1, 1), 0.01), "terminal_states": np.array([2]), "lengths": np.array([50]),
+              "loglik_per_step": np.array([1.0])}
+    hmm = GoalHMM.from_arrays(arrays, {"covariance_type": "full"})
+    return Pomrp(hmm, np.array([0.5, 2.0, 20.0]), off_model=OffModelConfig(enabled=False))
+
+
+def test_a_path_that_visits_the_terminal_state_and_moves_on_fails():
+    """The verdict is where the path ends, not whether it passed through the terminal state."""
+    pomrp = _terminal_can_be_left_pomrp()
+    means = pomrp.goal_model.means_
+    left = means[np.array([0] * 10 + [1] * 10 + [2] * 10 + [1] * 10)]
+    assert 2 in pomrp.goal_model.decode(left) and pomrp.goal_model.decode(left)[-1] == 1
+    d = pomrp.verdict_details(left)
+    assert d["final_state"] == 1 and not d["terminal"] and not d["success"]
+    assert not pomrp.verdict(left)
+    # Leaving the terminal state and coming back to it is a success; so is staying.
+    back = means[np.array([0] * 10 + [1] * 10 + [2] * 10 + [1] * 10 + [2] * 5)]
+    stays = means[np.array([0] * 10 + [1] * 10 + [2] * 20)]
+    assert pomrp.verdict(back) and pomrp.verdict(stays)
