@@ -305,6 +305,36 @@ def test_sampling_uses_the_scaled_covariance():
         search.tell(samples, RETURNS)
 
 
+def _block_covariances(samples, mean):
+    """Per-basis sample covariances (B, D, D) of samples (n, B, D) about ``mean`` (B, D)."""
+    d = samples - mean
+    return np.einsum("nbi,nbj->bij", d, d) / len(samples)
+
+
+def test_cma_es_samples_follow_the_whitened_covariance():
+    # vec(W) = vec(W0) + L z, z ~ N(0, sigma0^2 I): the samples' covariance is
+    # sigma0^2 Sigma0 per basis and zero across bases. Sigma0 strongly
+    # correlated, so that L L^T and L^T L differ (4.81 against 4 in [0, 0, 0]).
+    sigma0 = np.array([[[4.0, 1.8], [1.8, 1.0]], [[0.5, -0.3], [-0.3, 2.0]]])
+    n = 4000   # sample covariances within about 5 %, fixed seed
+    search = make_policy_search("cma-es", MEAN0, sigma0, sigma0=0.5, popsize=n, seed=2)
+    samples = search.ask(n)
+    np.testing.assert_allclose(samples.mean(axis=0), MEAN0, atol=0.05)
+    np.testing.assert_allclose(_block_covariances(samples, MEAN0), 0.25 * sigma0, rtol=0.08, atol=0.02)
+    np.testing.assert_allclose(search.sampling_covariances, 0.25 * sigma0, rtol=1e-3)
+    across = np.einsum("ni,nj->ij", samples[:, 0] - MEAN0[0], samples[:, 1] - MEAN0[1]) / n
+    assert np.abs(across).max() < 0.05
+    # After an update, the next samples follow what the search reports: its mean
+    # and sampling_covariances (the blocks of sigma^2 L C L^T).
+    search.tell(samples, -np.sum((samples - [[1.0, 0.0], [0.0, 1.0]]) ** 2, axis=(1, 2)))
+    after = search.ask(n)
+    np.testing.assert_allclose(after.mean(axis=0), search.mean, atol=0.05)
+    expected = search.sampling_covariances
+    assert not np.allclose(expected, 0.25 * sigma0, rtol=0.2)   # the update changed them
+    np.testing.assert_allclose(_block_covariances(after, search.mean), expected, rtol=0.1,
+                               atol=0.03 * np.abs(expected).max())
+
+
 # ---------------------------------------------------------------------------
 # Sigma schedule (Eq. 5.4), eigenvalue floor
 # ---------------------------------------------------------------------------
