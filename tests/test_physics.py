@@ -58,10 +58,19 @@ def test_arm_holds_home_for_60_s_with_the_gripper_commanded_closed(box_sim):
     assert log.peak_force == 0.0
 
 
-def test_commanded_joint_accelerations_stay_within_franka_limits_on_a_step(box_sim):
+@pytest.fixture(scope="module")
+def box_sim_1ms():
+    """The Open station at a 1 ms plant step: its limiters update at every 1 ms step."""
+    config = _config("open")
+    config.plant.time_step = 1e-3
+    return StationSimulation(config)
+
+
+def test_commanded_joint_accelerations_stay_within_franka_limits_on_a_step(box_sim_1ms):
     """A 20 cm step of the hand pose: the rate limiter keeps the commanded
-    acceleration and velocity within Franka's limits at every update (the
-    limiter's 1 ms steps, taken a plant step's worth at a time)."""
+    velocity, acceleration and jerk within Franka's limits at every 1 ms step
+    (observed on a 1 ms plant, where the limiter updates every step)."""
+    box_sim = box_sim_1ms
     box_sim.reset(0)
     home = box_sim.home_pose()
     step = RigidTransform(home.rotation(), home.translation() + [0.10, 0.15, -0.10])
@@ -71,7 +80,7 @@ def test_commanded_joint_accelerations_stay_within_franka_limits_on_a_step(box_s
     state_port = station.ee_controller.GetOutputPort("panda_state_desired")
     ctrl_context = station.ee_controller.GetMyContextFromRoot(box_sim.context)
     update = box_sim.config.time_step      # the limiter's update period (RateLimiter.update_period)
-    peak_a, peak_v, prev_v = np.zeros(7), np.zeros(7), None
+    peak_a, peak_v, prev_v, prev_a, jerk_capped = np.zeros(7), np.zeros(7), None, None, 0
     for k in range(1, int(round(1.5 / update))):
         box_sim.simulator.AdvanceTo(k * update)
         a = np.asarray(acc_port.Eval(context))
@@ -79,10 +88,16 @@ def test_commanded_joint_accelerations_stay_within_franka_limits_on_a_step(box_s
         peak_a, peak_v = np.maximum(peak_a, np.abs(a)), np.maximum(peak_v, np.abs(v))
         if prev_v is not None:
             assert np.all(np.abs(v - prev_v) <= limits.QDD_MAX * update * (1 + 1e-9))
-        prev_v = v
+            # Jerk: bounded except where the acceleration bound scaled the step or a joint's
+            # velocity bound clipped it (RateLimiter's docstring).
+            free = np.abs(v) < limits.QD_MAX * (1 - 1e-9)
+            if np.max(np.abs(a) / limits.QDD_MAX) < 1 - 1e-9:
+                assert np.all(np.abs(a - prev_a)[free] <= (limits.QDDD_MAX * update * (1 + 1e-9))[free])
+                jerk_capped += np.any(np.abs(a - prev_a)[free] > (0.99 * limits.QDDD_MAX * update)[free])
+        prev_v, prev_a = v, a
     assert np.all(peak_a <= limits.QDD_MAX * (1 + 1e-9)) and np.all(peak_v <= limits.QD_MAX * (1 + 1e-9))
     # The limits are reached (the step is a real test of the limiter), and the hand arrives.
-    assert np.any(peak_a > 0.5 * limits.QDD_MAX)
+    assert np.any(peak_a > 0.5 * limits.QDD_MAX) and jerk_capped > 0
     box_sim.run(None, 1.5, record_hz=10)
     assert np.linalg.norm(box_sim.ee_pose().translation() - step.translation()) < 5e-3
 

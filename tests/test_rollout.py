@@ -126,14 +126,10 @@ def reward_runner(tmp_path_factory):
 
 def test_rollout_with_the_goal_pipeline(reward_runner):
     skill, runner = reward_runner
-    for seed in (21, 23, 25, 27):
-        a = runner.run(skill.initial_weights, seed=seed)
-        if not a.failed:
-            break
-        # The station may stop a rollout (reflex); then it says why and pays nothing.
-        assert a.reason in FAILURE_REASONS and a.dense_return == 0.0 and a.message
-    else:
-        pytest.skip(f"the imitation failed on 4 poses ({a.reason}); reward checks need a full rollout")
+    # The shared skill's initial DMP imitates the Close of this seeded pose in full (fixed
+    # seeds: a regression that stops it fails here rather than skipping the reward checks).
+    a = runner.run(skill.initial_weights, seed=21)
+    assert not a.failed, f"{a.reason}: {a.message}"
     # Object frame from the segmenter's first frame: near the truth, not equal to it.
     assert np.linalg.norm(a.object_pose[:3] - a.object_pose_true[:3]) < 0.02
     assert not np.array_equal(a.object_pose, a.object_pose_true)
