@@ -378,3 +378,35 @@ def test_fit_demonstrations_scales_only_the_columns_that_move():
     assert plain.config.scaled_dims == []
     with pytest.raises(ValueError, match=r"DmpConfig\.scaled_dims: expected distinct weight columns in \[0, 7\)"):
         DmpConfig(scaled_dims=[7]).validate()
+
+
+def _minimum_jerk(s):
+    return 10 * s**3 - 15 * s**4 + 6 * s**5
+
+
+def test_each_column_is_scaled_only_when_every_demonstration_moves_along_it():
+    """Two demonstrations that move differently per column: y moves in both (scaled);
+    x moves 0.3 m in one but only 2 cm net in the other (a 10 cm push that comes back):
+    not scaled, so that demonstration's push keeps its shape from a start past its goal."""
+    t = np.linspace(0.0, 4.0, 401)
+    s, bump = t / 4.0, np.sin(np.pi * t / 4.0) ** 2
+    a, b = np.zeros((401, 7)), np.zeros((401, 7))
+    a[:, 0], a[:, 1], a[:, 2] = 0.3 * _minimum_jerk(s), 0.2 * _minimum_jerk(s), 0.2 + 0.1 * bump
+    b[:, 0], b[:, 1], b[:, 2] = 0.1 * bump + 0.02 * _minimum_jerk(s), 0.25 * _minimum_jerk(s), 0.2 + 0.08 * bump
+    a[:, 3] = b[:, 3] = 1.0
+    fit = fit_demonstrations([(t, a), (t, b)], DmpConfig(n_basis=20))
+    assert fit.config.scaled_dims == [1]
+    # y (scaled): a start 5 cm further from the goal stretches the demonstrated profile.
+    dmp = fit.dmps[0]
+    y0 = dmp.y0.copy()
+    y0[1] -= 0.05
+    out = integrate(Dmp(dmp.weights, y0, dmp.goal, dmp.tau), fit.config, t)
+    np.testing.assert_allclose((out[:, 1] - y0[1]) / (dmp.goal[1] - y0[1]), _minimum_jerk(s), atol=0.01)
+    # x (not scaled): 3 cm past the goal of the second demonstration, the push keeps
+    # its 10 cm (scaled by a = g - y0, it would turn into a 5 cm pull the other way).
+    dmp = fit.dmps[1]
+    y0 = dmp.y0.copy()
+    y0[0] += 0.03
+    out = integrate(Dmp(dmp.weights, y0, dmp.goal, dmp.tau), fit.config, t)
+    assert np.abs(out[:, 0] - b[:, 0]).max() < 0.035
+    assert out[:, 0].max() - out[0, 0] > 0.08
