@@ -410,3 +410,39 @@ def test_each_column_is_scaled_only_when_every_demonstration_moves_along_it():
     out = integrate(Dmp(dmp.weights, y0, dmp.goal, dmp.tau), fit.config, t)
     assert np.abs(out[:, 0] - b[:, 0]).max() < 0.035
     assert out[:, 0].max() - out[0, 0] > 0.08
+
+
+def _yaw_quaternions(yaw):
+    """Unit quaternions (T, 4), wxyz, of rotations by ``yaw`` (T,) rad about z."""
+    yaw = np.asarray(yaw, dtype=float)
+    return np.stack([np.cos(yaw / 2), np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2)], axis=-1)
+
+
+def test_ude_rotation_columns_scale_from_a_rotated_start():
+    """Ude's orientation amplitude a_o = 2 log(g * conj(q0)): demonstrations that turn
+    1.2 and 1.0 rad about z (with an overshoot) scale the z-rotation column; from a start
+    turned 0.3 rad further from the goal the turn is the demonstrated profile stretched."""
+    t = np.linspace(0.0, 4.0, 401)
+    s, bump = t / 4.0, np.sin(np.pi * t / 4.0) ** 2
+    profile = _minimum_jerk(s) + 0.25 * bump                     # 0 -> 1, overshooting on the way
+    demos = []
+    for turn, reach in ((1.2, 0.3), (1.0, 0.33)):
+        poses = np.zeros((401, 7))
+        poses[:, 0] = reach * _minimum_jerk(s)
+        poses[:, 3:] = _yaw_quaternions(0.2 + turn * profile)    # from yaw 0.2 rad
+        demos.append((t, poses))
+    cfg = DmpConfig(n_basis=20, quaternion="ude")
+    a = forcing_amplitude(demos[0][1][0], demos[0][1][-1], DmpConfig(quaternion="ude", scale_by_amplitude=True))
+    np.testing.assert_allclose(a, [0.3, 0.01, 0.01, 0.01, 0.01, 1.2], atol=1e-12)   # floored where 0
+    fit = fit_demonstrations(demos, cfg)
+    assert fit.config.scaled_dims == [0, 5]                      # x and the rotation about z
+    dmp = fit.dmps[0]
+    yaw = lambda q: 2 * np.arctan2(q[:, 3], q[:, 0])           # noqa: E731
+    out = integrate(dmp, fit.config, t)
+    np.testing.assert_allclose(yaw(out[:, 3:]), 0.2 + 1.2 * profile, atol=0.005)
+    # Start turned 0.3 rad away from the goal: a_o = 1.5 rad, the profile stretched by 1.5 / 1.2.
+    y0 = dmp.y0.copy()
+    y0[3:] = _yaw_quaternions(-0.1)
+    out = integrate(Dmp(dmp.weights, y0, dmp.goal, dmp.tau), fit.config, t)
+    np.testing.assert_allclose(yaw(out[:, 3:]), -0.1 + 1.5 * profile, atol=0.005)
+    np.testing.assert_allclose(out[:, 4:6], 0.0, atol=1e-9)     # still a turn about z only
