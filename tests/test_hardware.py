@@ -376,6 +376,36 @@ def test_measured_external_torque_goes_to_the_shared_reflex_check():
     np.testing.assert_allclose(station.GetOutputPort("panda_state").Eval(context)[:7], hardware_config.station.q_home)
 
 
+def test_first_command_is_the_measured_position_of_a_robot_away_from_home():
+    """A robot that is not at q_home when the run starts is commanded to stay where it
+    is, not to jump home (the simulated robot always starts at q_home, so the
+    rate-limit test above cannot tell "measured" from "home")."""
+    hardware_config = _hardware_config(_scenario("open"))
+    lcm = DrakeLcm("memq://")
+    recorder = _Recorder(lcmt_panda_command)
+    station, source, context, simulator = _harness(hardware_config, lcm, recorder)
+    q_home = np.asarray(hardware_config.station.q_home)
+    q_measured = q_home + [0.3, -0.2, 0.15, 0.25, -0.2, 0.3, -0.4]
+    msg = _status()
+    msg.joint_position = list(q_measured)
+    lcm.Publish(hardware_config.status_channel, msg.encode())     # the robot's one status: no SimRobot
+    station.reset(context, 0)
+    station_context = station.GetMyContextFromRoot(context)
+    X0 = station.GetOutputPort("ee_pose").Eval(station_context)
+    source.set_plan(source.GetMyMutableContextFromRoot(context), PosePlan.from_poses([0.0, 1.0], [X0, X0], [0.0] * 2))
+    simulator.Initialize()
+    simulator.AdvanceTo(0.02)                  # 20 commands, well within the status timeout
+    for _ in range(5):
+        lcm.HandleSubscriptions(1)
+    q = np.array([c.joint_position for c in recorder.messages])
+    assert len(q) >= 10
+    np.testing.assert_allclose(q[0], q_measured, atol=1e-9)
+    # Then no jump: the hand is held where it is (the commands stray at most 1.5 mrad
+    # from the measured joints in these 20 ms, measured).
+    assert np.max(np.abs(q - q_measured)) < 0.01
+    assert np.min(np.abs(q_measured - q_home)) > 0.1       # far from home in every joint
+
+
 def test_camera_over_lcm_gives_the_object_pose():
     from drake_skill.perception.systems import add_object_segmenter
 
