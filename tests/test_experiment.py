@@ -1,0 +1,189 @@
+"""``drake-skill experiment``: a tiny grid end to end on worker processes, resuming, retries, the report.
+
+The grid: the shared small Close skill (learning_support), PI^2-ES-Cov and
+PoWER with the dense reward, 2 runs each, 1 episode of 2 rollouts (PoWER: 2
+episodes of 1), 1 held-out pose, the segmenter's object frame, 2 workers.
+"""
+
+import importlib.util
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drake_skill.cli.main import main
+from drake_skill.experiments.grid import GridConfig, plan_tasks, run_dir, run_grid
+from drake_skill.experiments.pool import MAX_ATTEMPTS, run_on_processes
+from drake_skill.experiments.report import write_report
+from drake_skill.experiments.table import COLUMNS, read_table, table_text
+
+from learning_support import rollout_config, shared_skill
+
+RAY = importlib.util.find_spec("ray") is not None
+CONFIG = dict(skills=("close",), methods=("pi2-es-cov", "power"), rewards=("dense",), runs=2, episodes=1,
+              rollouts=2, held_out=1)
+
+
+def _grid(shared, out, use_ray=False, **changes):
+    return run_grid(out, GridConfig(**{**CONFIG, **changes}), skill_dir=shared["skill_dir"],
+                    station_yaml=shared["station_yaml"], rollout_config=rollout_config(), workers=2,
+                    use_ray=use_ray, progress=False, quiet=True)
+
+
+@pytest.fixture(scope="module")
+def grid(tmp_path_factory):
+    shared = shared_skill(tmp_path_factory)
+    out = tmp_path_factory.mktemp("experiment") / "grid"
+    outcome = _grid(shared, out)
+    return shared, out, outcome
+
+
+def _keys(rows):
+    return [(r["skill"], r["method"], r["reward"], r["run"], r["episode"]) for r in rows]
+
+
+def test_tiny_grid_runs_every_cell_on_worker_processes(grid):
+    _, out, outcome = grid
+    assert outcome.failed == [] and outcome.ran == 4 and outcome.stored == 4 and outcome.workers == 2
+    assert json.loads((out / "close" / "held_out_before.json").read_text())["report"]["seeds"] == [900000]
+    rows = read_table(out / "table.csv")
+    # PoWER (METHODS order): 2 updates of 1 rollout; PI^2-ES-Cov: greedy before and after its one update.
+    expected = [("close", m, "dense", run, e) for m, n in (("power", 3), ("pi2-es-cov", 2))
+                for run in (0, 1) for e in range(n)]
+    assert _keys(rows) == expected
+    assert [r["rollouts_used"] for r in rows if r["method"] == "power"][:3] == [0, 1, 2]  # greedy after each
+    assert [r["rollouts_used"] for r in rows if r["method"] == "pi2-es-cov"][:2] == [0, 2]
+    for r in rows:
+        assert r["success"] in (0, 1) and 0.0 <= r["held_out_after"] <= 1.0 and r["held_out_before"] is not None
+    for method in ("pi2-es-cov", "power"):
+        folder = run_dir(out, "close", method, "dense", 1)
+        summary = json.loads((folder / "summary.json").read_text())
+        assert summary["workers"] == 1 and summary["seed"] == 1 and summary["held_out_poses"] == 1
+        assert (folder / "checkpoint" / "search.npz").is_file() and not (folder / "skill").exists()
+    assert not list(out.glob("**/.*.partial"))
+
+
+def test_a_grid_run_is_the_learn_run_of_its_settings(grid, tmp_path):
+    """The grid's run 0 of PI^2-ES-Cov gives the numbers of learn() called with the same settings."""
+    from drake_skill.learning.loop import learn
+
+    shared, out, _ = grid
+    config = GridConfig(**CONFIG).learn_config("pi2-es-cov", "dense", 0)
+    direct = learn(out / "close" / "initial_skill", tmp_path / "direct", config, station_config=shared["station"],
+                   rollout_config=rollout_config(), replay=False, progress=False, log=open(os.devnull, "w"))
+    stored = json.loads((run_dir(out, "close", "pi2-es-cov", "dense", 0) / "summary.json").read_text())
+    strip = lambda curve: [{k: v for k, v in c.items() if k != "mean"} for c in curve]  # noqa: E731
+    assert strip(stored["curve"]) == json.loads(json.dumps(strip(direct.summary["curve"])))
+
+
+def test_resume_skips_finished_runs_and_redoes_a_deleted_one(grid):
+    shared, out, _ = grid
+    table = (out / "table.csv").read_bytes()
+    kept = run_dir(out, "close", "pi2-es-cov", "dense", 0) / "summary.json"
+    kept_stat = kept.stat().st_mtime_ns
+    shutil.rmtree(run_dir(out, "close", "power", "dense", 1))
+    outcome = _grid(shared, out)
+    assert outcome.ran == 1 and outcome.stored == 4 and outcome.failed == []
+    assert kept.stat().st_mtime_ns == kept_stat                 # not run again
+    # The redone run gives the same numbers: the same table, no duplicate, no gap.
+    assert (out / "table.csv").read_bytes() == table
+    rows = read_table(out / "table.csv")
+    assert len(set(_keys(rows))) == len(rows)
+    # Raising --runs adds only the new runs; other settings are refused.
+    specs = {"close": None}
+    names = [t.name for t in plan_tasks(out, GridConfig(**{**CONFIG, "runs": 3}), specs)]
+    assert names == ["close/pi2-es-cov/dense/run_002", "close/power/dense/run_002"]  # the order of --methods
+    with pytest.raises(ValueError, match="--episodes 2: the runs stored"):
+        _grid(shared, out, episodes=2)
+
+
+def _die_once(path):
+    """A task for the pool: the first attempt kills its worker process, the next returns."""
+    marker = Path(path)
+    if not marker.exists():
+        marker.write_text("died")
+        os._exit(3)
+    return {"path": path}
+
+
+def _always_die(path):
+    os._exit(4)
+
+
+def test_a_run_whose_worker_dies_is_retried(tmp_path):
+    done = {}
+    tasks = [str(tmp_path / f"task{i}") for i in range(3)]
+    run_on_processes(tasks, _die_once, 2, lambda t, result, error: done.setdefault(t, (result, error)))
+    assert done == {t: ({"path": t}, None) for t in tasks}
+    done.clear()
+    run_on_processes(["x"], _always_die, 1, lambda t, result, error: done.setdefault(t, (result, error)))
+    assert done["x"][0] is None and f"worker died {MAX_ATTEMPTS} times" in done["x"][1]
+
+
+def _synthetic_table(path):
+    """A table of every method and reward over 2 skills, 4 runs, 5 x 6 (PoWER 30 x 1)."""
+    rng = np.random.default_rng(0)
+    rows = []
+    for skill in ("open", "close"):
+        for method in ("power", "pi2", "pi2-cov", "pi2-es", "pi2-es-cov", "cma-es"):
+            for reward in ("dense", "sparse"):
+                for run in range(4):
+                    n, per = (31, 1) if method == "power" else (6, 6)
+                    rows += [dict(skill=skill, method=method, reward=reward, run=run, episode=e,
+                                  rollouts_used=e * per, success=int(rng.random() < e / n), return_=0.0,
+                                  held_out_after=float(rng.integers(0, 11)) / 10, held_out_before=0.4)
+                             for e in range(n)]
+    for r in rows:
+        r["return"] = r.pop("return_")
+    path.write_text(table_text(rows))
+    return path
+
+
+def test_report_from_the_table_alone_is_the_same_twice(grid, tmp_path):
+    _, out, _ = grid
+    for name, table in (("tiny", out / "table.csv"), ("full", _synthetic_table(tmp_path / "synthetic.csv"))):
+        saved = tmp_path / name
+        saved.mkdir()
+        shutil.copy(table, saved / "table.csv")
+        first = {p.name: p.read_bytes() for p in write_report(saved / "table.csv", saved / "a")}
+        second = {p.name: p.read_bytes() for p in write_report(saved / "table.csv", saved / "b")}
+        assert first == second and "results.md" in first
+        skills = sorted({r["skill"] for r in read_table(table)})
+        assert sorted(first) == sorted(["results.md", *(f"{s}_methods.png" for s in skills),
+                                        *(f"{s}_dense.png" for s in skills)])
+        text = first["results.md"].decode()
+        # Each claim is marked, whichever way (the verdicts are reported, not asserted).
+        assert sum(f"**{v}**" in text for v in ("holds", "does not hold", "cannot tell")) >= 1
+        assert text.count("**") == 6
+
+
+def test_report_cli_and_bad_input_name_the_flag(grid, tmp_path, capsys):
+    _, out, _ = grid
+    shutil.copy(out / "table.csv", tmp_path / "table.csv")
+    assert main(["experiment", "report", str(tmp_path)]) == 0
+    assert (tmp_path / "results.md").is_file()
+    bad = [(["--methods", "pi3"], "--methods pi3"), (["--skills", "fly"], "--skills fly"),
+           (["--rewards", "medium"], "--rewards medium"), (["--runs", "0"], "--runs 0")]
+    if not RAY:
+        bad.append((["--ray"], "pip install ray"))
+    for argv, text in bad:
+        capsys.readouterr()
+        assert main(["experiment", "run", "--out", str(tmp_path / "bad"), *argv]) == 2
+        err = capsys.readouterr().err
+        assert text in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "bad").exists()
+    (tmp_path / "other.csv").write_text("a,b\n1,2\n")
+    assert main(["experiment", "report", str(tmp_path), "--table", str(tmp_path / "other.csv")]) == 2
+    assert "not an experiment table" in capsys.readouterr().err
+    assert tuple(read_table(tmp_path / "table.csv")[0]) == COLUMNS
+
+
+@pytest.mark.skipif(not RAY, reason="ray is not installed (pip install ray)")
+def test_the_grid_on_local_ray_gives_the_process_pool_numbers(grid, tmp_path):
+    shared, out, _ = grid
+    outcome = _grid(shared, tmp_path / "ray", use_ray=True)
+    assert outcome.failed == [] and outcome.ran == 4
+    assert (tmp_path / "ray" / "table.csv").read_bytes() == (out / "table.csv").read_bytes()
