@@ -349,14 +349,15 @@ class GridOutcome:
 def run_grid(out, config: GridConfig, *, skill_dir=None, station_yaml=None, rollout_config=None,
              workers: int | None = None, use_ray: bool = False, ray_address: str | None = None,
              progress: bool = True, quiet: bool = False) -> GridOutcome:
-    """Runs the runs of the grid not stored in ``out`` yet, then writes ``OUT/table.csv``.
+    """Runs the runs of the grid not stored in ``out`` yet, then writes ``OUT/table.csv``
+    (also when interrupted: the runs stored so far).
 
     rollout_config: ``RolloutConfig`` (default: perceived object frame);
     station_yaml: a scenario YAML over each skill's scenario (``--scenario``);
     workers: processes / Ray CPUs (default one per CPU this process may use);
     use_ray / ray_address: Ray (local / a cluster) instead of processes.
     """
-    from drake_skill.experiments.pool import ray_or_error, run_on_processes, run_on_ray
+    from drake_skill.experiments.pool import ray_or_error
     from drake_skill.experiments.table import stored_runs, write_table
     from drake_skill.learning.workers import default_workers
 
@@ -374,18 +375,27 @@ def run_grid(out, config: GridConfig, *, skill_dir=None, station_yaml=None, roll
     failed: list[tuple[str, str]] = []
     done = {"runs": 0}
     start = time.perf_counter()
-    if tasks:
-        on_done, close = _progress(tasks, failed, done, progress)
-        try:
-            if use_ray or ray_address:
-                run_on_ray(tasks, execute_task, workers, on_done, address=ray_address)
-            else:
-                run_on_processes(tasks, execute_task, workers, on_done)
-        finally:
-            close()
-    table = write_table(out)
+    try:
+        if tasks:
+            _execute(tasks, workers, use_ray, ray_address, _progress(tasks, failed, done, progress))
+    finally:                               # interrupted too: the table of the runs stored so far
+        table = write_table(out)
     return GridOutcome(done["runs"], len(stored_runs(out)), failed, table, round(time.perf_counter() - start, 1),
                        workers)
+
+
+def _execute(tasks, workers: int, use_ray: bool, ray_address, progress) -> None:
+    """Runs ``tasks`` on Ray or worker processes; ``progress``: (on_done, close)."""
+    from drake_skill.experiments.pool import run_on_processes, run_on_ray
+
+    on_done, close = progress
+    try:
+        if use_ray or ray_address:
+            run_on_ray(tasks, execute_task, workers, on_done, address=ray_address)
+        else:
+            run_on_processes(tasks, execute_task, workers, on_done)
+    finally:
+        close()
 
 
 def _runner_specs(out: Path, config: GridConfig, skill_dir, station_yaml, rollout_config, quiet: bool) -> dict:
