@@ -43,18 +43,30 @@ DEFAULT_OUT = Path("results") / "experiment"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.description = __doc__
+    parser.formatter_class = argparse.RawDescriptionHelpFormatter
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", title="actions")
+    actions.required = True
+    _add_run_arguments(actions.add_parser(
+        "run", help="run the grid's runs not stored yet, then write OUT/table.csv",
+        description="Runs the grid (resumable); see 'drake-skill experiment --help'."))
+    report_p = actions.add_parser("report", help="figures and results.md from OUT/table.csv (no simulation)",
+                                  description="Figures and results.md from a grid's table alone.")
+    report_p.add_argument("out", type=Path, help="the grid folder (holding table.csv)")
+    report_p.add_argument("--table", type=Path, default=None, help="the table (default OUT/table.csv)")
+    report_p.add_argument("--report-dir", type=Path, default=None, help="where to write (default OUT)")
+    for action in actions.choices.values():      # 'experiment run --verbose' as 'experiment --verbose run'
+        action.add_argument("--verbose", action="store_true", default=argparse.SUPPRESS,
+                            help="print tracebacks of errors and every differential-IK warning")
+
+
+def _add_run_arguments(run_p: argparse.ArgumentParser) -> None:
     from drake_skill.common import SKILLS
     from drake_skill.experiments.grid import DEFAULT_RUNS
     from drake_skill.learning.loop import REWARDS
     from drake_skill.learning.policy_search import METHODS
     from drake_skill.learning.workers import default_workers
 
-    parser.description = __doc__
-    parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    actions = parser.add_subparsers(dest="action", metavar="ACTION", title="actions")
-    actions.required = True
-    run_p = actions.add_parser("run", help="run the grid's runs not stored yet, then write OUT/table.csv",
-                               description="Runs the grid (resumable); see 'drake-skill experiment --help'.")
     grid = run_p.add_argument_group("grid")
     grid.add_argument("--skills", nargs="+", default=["open", "close"], metavar="SKILL",
                       help=f"some of {', '.join(SKILLS)} (default open close)")
@@ -86,11 +98,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     where.add_argument("--keep-skills", action="store_true",
                        help="keep each run's learned skill/ folder (7 MB each; the weights are in checkpoint/)")
     where.add_argument("--quiet", action="store_true", help="no progress bar")
-    report_p = actions.add_parser("report", help="figures and results.md from OUT/table.csv (no simulation)",
-                                  description="Figures and results.md from a grid's table alone.")
-    report_p.add_argument("out", type=Path, help="the grid folder (holding table.csv)")
-    report_p.add_argument("--table", type=Path, default=None, help="the table (default OUT/table.csv)")
-    report_p.add_argument("--report-dir", type=Path, default=None, help="where to write (default OUT)")
 
 
 def _run(args) -> int:
