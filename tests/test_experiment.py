@@ -79,16 +79,22 @@ def test_a_grid_run_is_the_learn_run_of_its_settings(grid, tmp_path):
     assert strip(stored["curve"]) == json.loads(json.dumps(strip(direct.summary["curve"])))
 
 
-def test_resume_skips_finished_runs_and_redoes_a_deleted_one(grid):
+def test_resume_skips_finished_runs_redoes_a_deleted_one_and_ends_a_partial_one(grid):
     shared, out, _ = grid
     table = (out / "table.csv").read_bytes()
     kept = run_dir(out, "close", "pi2-es-cov", "dense", 0) / "summary.json"
     kept_stat = kept.stat().st_mtime_ns
-    shutil.rmtree(run_dir(out, "close", "power", "dense", 1))
+    shutil.rmtree(run_dir(out, "close", "pi2-es-cov", "dense", 1))
+    # A worker that died after learn() ended, before the rename: a partial folder with the last checkpoint.
+    partial = run_dir(out, "close", "power", "dense", 1).with_name(".run_001.partial")
+    run_dir(out, "close", "power", "dense", 1).rename(partial)
+    (partial / "summary.json").unlink()
     outcome = _grid(shared, out)
-    assert outcome.ran == 1 and outcome.stored == 4 and outcome.failed == []
+    assert outcome.ran == 2 and outcome.stored == 4 and outcome.failed == []
     assert kept.stat().st_mtime_ns == kept_stat                 # not run again
-    # The redone run gives the same numbers: the same table, no duplicate, no gap.
+    assert json.loads((run_dir(out, "close", "power", "dense", 1) / "summary.json").read_text())["resumed"]
+    assert not partial.exists()
+    # The redone and the resumed run give the same numbers: the same table, no duplicate, no gap.
     assert (out / "table.csv").read_bytes() == table
     rows = read_table(out / "table.csv")
     assert len(set(_keys(rows))) == len(rows)
