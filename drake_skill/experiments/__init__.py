@@ -10,5 +10,5 @@
   the table alone.
 
 ``drake-skill experiment run`` / ``drake-skill experiment report`` are the
-command line.
+command line. Nothing here imports Drake at import time; the workers do.
 """
