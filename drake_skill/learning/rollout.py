@@ -60,7 +60,8 @@ from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
 from drake_skill.station.builder import Station, build_station
 from drake_skill.station.config import StationConfig, scenario_for_skill
-from drake_skill.station.simulation import StationRecorder, pose_to_vector
+from drake_skill.station.records import StationLoggers
+from drake_skill.station.simulation import advance_station, check_joint_state, pose_to_vector
 from drake_skill.station.success import judge_run
 
 __all__ = ["FAILURE_REASONS", "ActionModel", "ObjectPoseSource", "RolloutConfig", "RolloutResult",
@@ -332,6 +333,7 @@ class RolloutRunner:
         elif self.rollout_config.object_pose == "perceived":
             from drake_skill.perception.systems import add_object_segmenter
             self.segmenter = add_object_segmenter(builder, self.station)
+        self.loggers = StationLoggers(builder, self.station, self.rollout_config.record_hz)
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         self.simulator = Simulator(self.diagram, self.context)
@@ -382,6 +384,7 @@ class RolloutRunner:
         if np.dot(y0[3:], dmp.goal[3:]) < 0:   # same quaternion hemisphere as the goal
             y0[3:] *= -1
         self.dmp_system.set_start_goal(dmp_context, y0, dmp.goal)
+        self.loggers.clear(self.context)
         self.simulator.Initialize()           # latches X_WO into the DMP
         return X_WO
 
@@ -446,12 +449,14 @@ class RolloutRunner:
         self._check_trajectory()
         hz = self.rollout_config.record_hz
         n = int(np.ceil(self.duration() * hz - 1e-9))
-        recorder = StationRecorder(self.station, self.context, self.simulator, hz)
-        recorder.anchor()
-        recorder.record(n)
-        times, poses, objs = np.array(recorder.times), np.array(recorder.X_WE), np.array(recorder.obj)
+        # One advance over the whole rollout; the loggers in the diagram record it.
+        advance_station(self.simulator, self.station, self.context, n / hz)
+        records = self.loggers.read(self.context, n)
+        for t, state in zip(records.times, records.state):
+            check_joint_state(state, t)
+        times, poses, objs = records.times, records.ee_pose, records.object_state
         final = float(objs[-1])
-        success = judge_run(self.skill_name, times, objs, np.array(recorder.force), self.config.success)
+        success = judge_run(self.skill_name, times, objs, records.contact_force, self.config.success)
         result.success, result.final_object_state = bool(success), final
         result.times, result.ee_pose, result.object_state = times, poses, objs
         if self.pipeline is not None:

@@ -111,6 +111,41 @@ class RunLog:
         return float(np.max(self.contact_force)) if self.contact_force.size else 0.0
 
 
+def advance_station(simulator, station, root_context, t: float, pending: bool = False) -> None:
+    """``simulator.AdvanceTo(t)`` (and, with ``pending``, the events due at t) on a diagram
+    holding ``station``. Raises :class:`ReflexError` when the station's reflex monitor
+    stopped the simulator (from the monitor's state), :class:`SolverError` when SAP
+    failed to converge, RuntimeError when another system ended the simulation."""
+    try:
+        status = None
+        if t > root_context.get_time():
+            status = simulator.AdvanceTo(t)
+        tripped = status is not None and status.reason() == _TERMINATED
+        if pending and not tripped:
+            simulator.AdvancePendingEvents()
+    except RuntimeError as e:
+        if "failed to converge" in str(e):
+            time_s = root_context.get_time()
+            raise SolverError(f"the contact solver failed to converge at t = {time_s:.3f} s: {e}", time_s) from e
+        raise
+    if tripped:
+        monitor = station.reflex_monitor
+        trip = monitor.trip(monitor.GetMyContextFromRoot(root_context))
+        if trip is None:     # another system ended the simulation
+            raise RuntimeError(f"the simulation ended at t = {status.return_time():.3f} s: "
+                               f"{status.FormatMessage()}")
+        raise ReflexError(*trip)
+
+
+def check_joint_state(state, t: float) -> None:
+    """Raises :class:`DivergedError` when the station's joint state (14) at t [s] is not
+    finite or a joint moves faster than 50 rad/s."""
+    if not np.all(np.isfinite(state)) or np.max(np.abs(state[7:])) > 50.0:
+        raise DivergedError(
+            f"simulation diverged at t = {t:.3f} s (joint state {np.round(state, 3)}); "
+            "check the commanded poses and the plant time_step", t)
+
+
 class StationRecorder:
     """Advances a simulator and samples its station: hand pose, joints, object
     state and peak (filtered) contact force at ``record_hz``; with ``frame_hz``, camera
@@ -199,28 +234,9 @@ class StationRecorder:
 
     # ---------------------------------------------------------------- stepping
     def _advance(self, t: float, pending: bool) -> None:
-        """Advances to t (and, with ``pending``, handles the events due at t); raises
-        :class:`ReflexError` when the station's reflex monitor stopped the simulator,
-        :class:`SolverError` when SAP failed."""
-        try:
-            status = None
-            if t > self.root_context.get_time():
-                status = self.simulator.AdvanceTo(t)
-            tripped = status is not None and status.reason() == _TERMINATED
-            if pending and not tripped:
-                self.simulator.AdvancePendingEvents()
-        except RuntimeError as e:
-            if "failed to converge" in str(e):
-                time_s = self.root_context.get_time()
-                raise SolverError(f"the contact solver failed to converge at t = {time_s:.3f} s: {e}",
-                                  time_s) from e
-            raise
-        if tripped:
-            trip = self._monitor.trip(self._monitor_context)
-            if trip is None:     # another system ended the simulation
-                raise RuntimeError(f"the simulation ended at t = {status.return_time():.3f} s: "
-                                   f"{status.FormatMessage()}")
-            raise ReflexError(*trip)
+        """Advances to t (and, with ``pending``, handles the events due at t); raises as
+        :func:`advance_station`."""
+        advance_station(self.simulator, self.station, self.root_context, t, pending)
         # The peak filtered force over this interval (the reflex monitor's, ReflexMonitor.take_peak).
         self._last_peak = self._monitor.take_peak(self._monitor_context)
 
@@ -237,10 +253,7 @@ class StationRecorder:
         if at_frame and self.segmenter is not None:
             self._perceive(i // self.k)
         state = self._ports["panda_state"].Eval(self.context)
-        if not np.all(np.isfinite(state)) or np.max(np.abs(state[7:])) > 50.0:
-            raise DivergedError(
-                f"simulation diverged at t = {t:.3f} s (joint state {np.round(state, 3)}); "
-                "check the commanded poses and the plant time_step", t)
+        check_joint_state(state, t)
         self.times.append(t)
         self.X_WE.append(pose_to_vector(self._ports["ee_pose"].Eval(self.context)))
         self.q.append(state[:7].copy())
