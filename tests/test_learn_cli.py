@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from drake_skill.cli.main import main
-from drake_skill.learning.loop import ARTIFACTS, EXPLORATION_SCALES, plot_outcomes_by_placement
+from drake_skill.learning.loop import ARTIFACTS, EXPLORATION_SCALES, HELD_OUT_SEED0, plot_outcomes_by_placement
 from drake_skill.skill import Skill
 from drake_skill.station.builder import Station
 from pydrake.math import RollPitchYaw
@@ -20,7 +20,7 @@ def learned(tmp_path_factory):
     shared = shared_skill(tmp_path_factory)
     out = tmp_path_factory.mktemp("learn_cli") / "run"
     argv = ["learn", "--skill-dir", str(shared["skill_dir"]), "--station-config", str(shared["station_yaml"]),
-            "--episodes", "1", "--rollouts", "2", "--held-out", "1", "--seed", "5", "--out", str(out), "--quiet"]
+            "--episodes", "1", "--rollouts", "2", "--held-out", "2", "--seed", "5", "--out", str(out), "--quiet"]
     assert main(argv) == 0
     return shared, out, argv
 
@@ -35,8 +35,16 @@ def test_learn_writes_every_artifact(learned, capsys):
     # No --exploration-scale: the skill's default, saved as the number used.
     name = Skill.load(shared["skill_dir"]).name
     assert json.loads((out / "config.json").read_text())["learn"]["exploration_scale"] == EXPLORATION_SCALES[name]
-    assert summary["n_rollouts"] == 2 and 0.0 <= summary["held_out_after"] <= 1.0
+    assert summary["n_rollouts"] == 2
     records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
+    # Seed 5: the greedy execution succeeds on its pose before learning and fails after
+    # the one update (both rollouts failed); of the two held-out poses the second
+    # succeeds before learning, neither after.
+    assert summary["greedy_success"] == [True, False]
+    held = [r for r in records if r["type"] == "held_out"]
+    assert [r["successes"] for r in held] == [[False, True], [False, False]]
+    assert [r["success_rate"] for r in held] == [summary["held_out_before"], summary["held_out_after"]]
+    assert summary["held_out_before"] == 0.5 and summary["held_out_after"] == 0.0
     # The greedy execution before learning waits for the one after the update (GREEDY_BATCH = 2).
     assert [r["type"] for r in records] == ["held_out", "rollout", "rollout", "greedy", "episode", "greedy",
                                            "episode", "held_out"]
@@ -56,6 +64,28 @@ def test_learn_writes_every_artifact(learned, capsys):
     assert not np.array_equal(learned_skill.initial_weights, Skill.load(shared["skill_dir"]).initial_weights)
 
 
+def test_held_out_poses_are_the_fixed_seeds_not_the_training_ones(learned):
+    """learn's held-out evaluation, before and after, runs on the poses of seeds
+    HELD_OUT_SEED0.. (evaluate's), none of them a pose the search trained on."""
+    shared, out, _ = learned
+    records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
+    held = [r for r in records if r["type"] == "held_out"]
+    assert [r["phase"] for r in held] == ["before", "after"]
+    assert all(r["seeds"] == [HELD_OUT_SEED0, HELD_OUT_SEED0 + 1] for r in held)
+    trained = [r["seed"] for r in records if r["type"] in ("rollout", "greedy")]
+    assert len(trained) == 4 and not set(trained) & {HELD_OUT_SEED0, HELD_OUT_SEED0 + 1}
+    # The poses the held-out rollouts ran on (the simulator's): the station's poses of
+    # those seeds, away from every training pose.
+    station = Station(dc.replace(shared["station"], enable_camera=False))   # the placement needs no camera
+    poses = [station.random_object_pose(HELD_OUT_SEED0 + i) for i in range(2)]
+    expected = [[*X.translation()[:2], RollPitchYaw(X.rotation()).yaw_angle()] for X in poses]
+    for r in held:
+        np.testing.assert_allclose(r["object_poses"], expected, atol=1e-9)
+    for seed in trained:
+        p = station.random_object_pose(seed).translation()
+        assert min(np.linalg.norm(p - X.translation()) for X in poses) > 1e-3
+
+
 def test_learn_refuses_to_overwrite_and_to_resume_nothing(learned, tmp_path, capsys):
     _, out, argv = learned
     assert main(argv) == 2
@@ -71,21 +101,22 @@ def test_evaluate_the_learned_skill(learned, capsys):
     shared, out, _ = learned
     capsys.readouterr()
     assert main(["evaluate", "--skill", str(out / "skill"), "--station-config", str(shared["station_yaml"]),
-                 "--poses", "1", "--json"]) == 0
+                 "--poses", "2", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report["learned"] and report["seeds"] == [900000]
+    assert report["learned"] and report["seeds"] == [900000, 900001]
     assert report == json.loads((out / "skill" / "evaluation.json").read_text())
-    # The held-out pose of learn's final evaluation is the same pose: the same verdict.
+    # The held-out poses of learn's final evaluation are the same poses: the same verdicts.
     held = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()][-1]
     policy = report["policies"][str(report["initial_index"])]
     assert policy["successes"] == held["successes"] and policy["returns"] == held["returns"]
     # Per rollout: where the object stood (the station's pose of that seed) and why it failed.
     station = Station(dc.replace(shared["station"], enable_camera=False))   # the placement needs no camera
-    X_WO = station.random_object_pose(900000)
-    (x, y, yaw), = policy["object_poses"]
-    assert np.allclose([x, y], X_WO.translation()[:2], atol=1e-9)
-    assert yaw == pytest.approx(RollPitchYaw(X_WO.rotation()).yaw_angle(), abs=1e-9)
-    assert policy["reasons"] == [held["reasons"][0]] and (policy["reasons"][0] != "") == bool(policy["failures"])
+    for seed, (x, y, yaw) in zip(report["seeds"], policy["object_poses"], strict=True):
+        X_WO = station.random_object_pose(seed)
+        assert np.allclose([x, y], X_WO.translation()[:2], atol=1e-9)
+        assert yaw == pytest.approx(RollPitchYaw(X_WO.rotation()).yaw_angle(), abs=1e-9)
+    assert policy["reasons"] == held["reasons"]
+    assert sum(reason != "" for reason in policy["reasons"]) == sum(policy["failures"].values())
     assert (out / "skill" / "evaluation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
