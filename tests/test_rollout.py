@@ -162,3 +162,26 @@ def test_the_skill_s_finger_opening_is_commanded(draw_setup):
                           for side in ("left", "right")))
     assert widths[0] == pytest.approx(0.0, abs=1e-3)
     assert widths[1] == pytest.approx(0.05, abs=2e-3)
+
+
+def test_the_loggers_record_what_sampling_the_ports_after_each_advance_gives(draw_setup):
+    """A rollout's records come from the loggers in the diagram (StationLoggers); they
+    equal, bit for bit, a StationRecorder stepping the same rollout sample by sample
+    (the state AdvanceTo(t) leaves, events due at t pending), peak forces included."""
+    from drake_skill.station.simulation import StationRecorder
+
+    dmp, runner, _ = draw_setup
+    logged = runner.run(dmp.weights, 5)
+    assert not logged.failed, logged.message
+    runner.reset(dmp.weights, 5)
+    hz = runner.rollout_config.record_hz
+    recorder = StationRecorder(runner.station, runner.context, runner.simulator, hz)
+    recorder.anchor()
+    recorder.record(len(logged.times) - 1)
+    records = runner.loggers.read(runner.context, len(logged.times) - 1)
+    assert np.array_equal(logged.times, recorder.times)
+    assert np.array_equal(logged.ee_pose, np.array(recorder.X_WE))
+    assert np.array_equal(logged.object_state, recorder.obj)
+    assert np.array_equal(records.state[:, :7], np.array(recorder.q))
+    assert np.array_equal(records.contact_force, recorder.force)
+    assert np.max(records.contact_force) > 1.0      # the finger pulls the handle: forces are recorded
