@@ -22,7 +22,6 @@ ends: ``result`` a dict, or None with ``error`` a one-line reason.
 from __future__ import annotations
 
 import multiprocessing
-import os
 import traceback
 from collections import deque
 from collections.abc import Callable, Sequence
@@ -67,23 +66,11 @@ class _Workers:
         self.started = 0
 
     def start(self) -> tuple[Any, Any]:
-        from drake_skill.learning.workers import _WORKER_ENV
+        from drake_skill.learning.workers import spawn_worker
 
-        parent, child = self._context.Pipe()
-        saved = {key: os.environ.get(key) for key in _WORKER_ENV}
-        os.environ.update(_WORKER_ENV)          # one thread per library, inherited at spawn
-        try:
-            process = self._context.Process(target=_serve, args=(self.fn, child), daemon=True)
-            process.start()
-        finally:
-            for key, value in saved.items():
-                if value is None:
-                    os.environ.pop(key, None)
-                else:
-                    os.environ[key] = value
-        child.close()
+        worker = spawn_worker(self._context, _serve, self.fn)
         self.started += 1
-        return process, parent
+        return worker
 
     def send(self, task) -> tuple[Any, Any]:
         """Gives ``task`` to an idle worker (one that died idle is replaced) or a new one."""

@@ -183,6 +183,27 @@ def _worker_main(spec: RunnerSpec, connection) -> None:
         connection.send(("result", (index, result)))
 
 
+def spawn_worker(context, target: Callable, payload) -> tuple[Any, Any]:
+    """Starts ``target(payload, connection)`` in a process of the multiprocessing
+    ``context`` with the workers' environment (:data:`_WORKER_ENV`, inherited by the
+    spawned interpreter; this process's is restored). Returns (process, this end of
+    the pipe)."""
+    parent, child = context.Pipe()
+    saved = {key: os.environ.get(key) for key in _WORKER_ENV}
+    os.environ.update(_WORKER_ENV)
+    try:
+        process = context.Process(target=target, args=(payload, child), daemon=True)
+        process.start()
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+    child.close()
+    return process, parent
+
+
 class ProcessPool(_Pool):
     """``n_workers`` persistent worker processes (``spawn``), one runner each.
 
@@ -207,20 +228,7 @@ class ProcessPool(_Pool):
             raise
 
     def _start(self):
-        parent, child = self._context.Pipe()
-        saved = {key: os.environ.get(key) for key in _WORKER_ENV}
-        os.environ.update(_WORKER_ENV)          # inherited by the spawned interpreter
-        try:
-            process = self._context.Process(target=_worker_main, args=(self.spec, child), daemon=True)
-            process.start()
-        finally:
-            for key, value in saved.items():
-                if value is None:
-                    os.environ.pop(key, None)
-                else:
-                    os.environ[key] = value
-        child.close()
-        return process, parent
+        return spawn_worker(self._context, _worker_main, self.spec)
 
     @staticmethod
     def _await_ready(process, connection) -> None:
