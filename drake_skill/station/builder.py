@@ -284,6 +284,7 @@ class Station(Diagram):
         # Measured outputs.
         builder.ExportOutput(plant.get_state_output_port(arm), "panda_state")
         hand_body = plant.GetBodyByName("panda_hand", hand)
+        self._hand_body = hand_body
         ee = builder.AddNamedSystem("ee_pose", _FramePose(hand_body.index(), X_HAND_TCP))
         builder.Connect(plant.get_body_poses_output_port(), ee.get_input_port())
         builder.ExportOutput(ee.get_output_port(), "ee_pose")
@@ -307,6 +308,16 @@ class Station(Diagram):
                                            MeshcatVisualizerParams(role=Role.kIllustration))
         builder.BuildInto(self)
         self.set_name("station")
+        self._kinematics = None
+
+    def hand_pose(self, q) -> RigidTransform:
+        """X_WE, the ``ee_pose`` output's value, at arm joint positions q (7) [rad] (the
+        hand's pose depends on nothing else): the loggers record q and not the pose."""
+        if self._kinematics is None:
+            # Scratch memory for the kinematics, not run state: every call writes q first.
+            self._kinematics = self.plant.CreateDefaultContext()
+        self.plant.SetPositions(self._kinematics, self.panda, np.asarray(q, dtype=float))
+        return self.plant.EvalBodyPoseInWorld(self._kinematics, self._hand_body) @ X_HAND_TCP
 
     def robot_scene_contact(self, context) -> tuple[float, np.ndarray]:
         """(sum of the robot-scene contact force magnitudes [N], external joint

@@ -218,10 +218,13 @@ class ForwardKinematics(LeafSystem):
         self.DeclareAbstractOutputPort("X_WE", lambda: Value(RigidTransform()), self._calc_pose,
                                        {self._state.ticket()})
 
+    def pose(self, q) -> RigidTransform:
+        """X_WE at joint positions q (7) [rad]."""
+        self._plant.SetPositions(self._plant_context, q)
+        return self._plant.CalcRelativeTransform(self._plant_context, self._plant.world_frame(), self._frame)
+
     def _calc_pose(self, context, output):
-        self._plant.SetPositions(self._plant_context, self._state.Eval(context)[:N_JOINTS])
-        output.set_value(self._plant.CalcRelativeTransform(self._plant_context, self._plant.world_frame(),
-                                                           self._frame))
+        output.set_value(self.pose(self._state.Eval(context)[:N_JOINTS]))
 
 
 class GroundTruthDecoder(LeafSystem):
@@ -464,7 +467,7 @@ class HardwareStation(Diagram):
         builder.Connect(receiver.get_position_measured_output_port(), state.get_input_port(0))
         builder.Connect(receiver.get_velocity_measured_output_port(), state.get_input_port(1))
         builder.ExportOutput(state.get_output_port(), "panda_state")
-        fk = builder.AddNamedSystem("ee_pose", ForwardKinematics())
+        fk = self._forward_kinematics = builder.AddNamedSystem("ee_pose", ForwardKinematics())
         builder.Connect(state.get_output_port(), fk.get_input_port())
         builder.ExportOutput(fk.get_output_port(), "ee_pose")
         self._receiver = receiver
@@ -638,6 +641,10 @@ class HardwareStation(Diagram):
         a human places the object at X_WO and confirms (``hardware run`` prompts
         for the Enter key). None: no wait (a simulated robot resets itself)."""
         self._reset_hook = hook
+
+    def hand_pose(self, q) -> RigidTransform:
+        """X_WE, the ``ee_pose`` output's value, at joint positions q (7) [rad]."""
+        return self._forward_kinematics.pose(np.asarray(q, dtype=float))
 
     def robot_scene_contact(self, context) -> tuple[float, np.ndarray]:
         """(contact force [N], external joint torques (7) [N m]) as the robot measures

@@ -1,9 +1,12 @@
 """What a run records, by Drake's loggers in the diagram.
 
 :class:`StationLoggers` adds ``VectorLogSink`` systems (``LogVectorOutput``)
-on a station's outputs: the hand pose X_WE (as [x, y, z, qw, qx, qy, qz], by
-:class:`PoseVector`), the joint state, the object state and the reflex
-monitor's filtered contact force, at the end of every simulator step. The
+on a station's outputs: the joint state, the object state and the reflex
+monitor's state, at the end of every simulator step. All three are computed
+in C++ (a Python output evaluated at every step would cost more than the
+plant: 60 ms per simulated second with the hand pose logged); the hand pose
+X_WE of a sample is the station's ``hand_pose`` of its joint positions, the
+value its ``ee_pose`` output has then. The
 simulator ends a step at every event time, and a step's end sees the state
 after every event before it; so the sample of a grid time t is the first
 step end at or after t, the state ``Simulator.AdvanceTo(t)`` leaves (events
@@ -24,26 +27,11 @@ from __future__ import annotations
 import dataclasses as dc
 
 import numpy as np
-from pydrake.common.value import Value
-from pydrake.math import RigidTransform
-from pydrake.systems.framework import BasicVector, LeafSystem
 from pydrake.systems.primitives import LogVectorOutput
 
-__all__ = ["PoseVector", "StationLoggers", "StationRecords"]
+from drake_skill.station.simulation import pose_to_vector
 
-
-class PoseVector(LeafSystem):
-    """Input ``X`` (RigidTransform); output ``vector`` [7]: translation [m] and unit
-    quaternion [qw, qx, qy, qz]."""
-
-    def __init__(self):
-        super().__init__()
-        self._X = self.DeclareAbstractInputPort("X", Value(RigidTransform()))
-        self.DeclareVectorOutputPort("vector", 7, self._calc, {self._X.ticket()})
-
-    def _calc(self, context, output: BasicVector):
-        X = self._X.Eval(context)
-        output.SetFromVector(np.r_[X.translation(), X.rotation().ToQuaternion().wxyz()])
+__all__ = ["StationLoggers", "StationRecords"]
 
 
 @dc.dataclass
@@ -67,9 +55,7 @@ class StationLoggers:
     def __init__(self, builder, station, record_hz: float):
         self.station = station
         self.record_hz = float(record_hz)
-        pose = builder.AddNamedSystem("ee_pose_vector", PoseVector())
-        builder.Connect(station.GetOutputPort("ee_pose"), pose.get_input_port())
-        ports = {"ee_pose": pose.get_output_port(), "state": station.GetOutputPort("panda_state"),
+        ports = {"state": station.GetOutputPort("panda_state"),
                  "object_state": station.GetOutputPort("object_state"),
                  "reflex": station.GetOutputPort("reflex_state")}
         # Publish period 0: at the end of every simulator step (module docstring).
@@ -93,7 +79,8 @@ class StationLoggers:
         rows = np.searchsorted(times, grid, side="left")     # first step end at or after t_k
         data = {name: log.data()[:, rows].T for name, log in logs.items()}
         force = _interval_peaks(times, logs["reflex"].data()[0], rows)
-        return StationRecords(grid, data["ee_pose"], data["state"], data["object_state"][:, 0], force)
+        poses = np.array([pose_to_vector(self.station.hand_pose(q[:7])) for q in data["state"]]).reshape(-1, 7)
+        return StationRecords(grid, poses, data["state"], data["object_state"][:, 0], force)
 
 
 def _interval_peaks(times: np.ndarray, values: np.ndarray, rows: np.ndarray) -> np.ndarray:

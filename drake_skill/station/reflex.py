@@ -78,8 +78,8 @@ def reflex_filter_step(x: np.ndarray, force: float, tau, now: float, params: np.
 
 class ReflexMonitor(LeafSystem):
     """Inputs ``contact_force`` [1] (robot-scene contact force [N]) and ``external_torque``
-    [7] [N m]; output ``filtered`` [9]: [f_hat, tau_hat (7), peak f_hat] as of the last
-    update. The module docstring gives the filter; ``reflex`` is the scenario's
+    [7] [N m]; output ``filtered`` [10]: the state [f_hat, tau_hat (7), time of the last
+    update [s], peak f_hat] (a state output port: no Python per evaluation). The module docstring gives the filter; ``reflex`` is the scenario's
     ``ReflexConfig`` (the parameter's defaults), ``period`` the update's [s].
     """
 
@@ -94,7 +94,7 @@ class ReflexMonitor(LeafSystem):
         self._tau = self.DeclareVectorInputPort("external_torque", N_JOINTS)
         self._state = self.DeclareDiscreteState(_STATE_SIZE)
         self.DeclarePeriodicDiscreteUpdateEvent(float(period), 0.0, self._update)
-        self.DeclareVectorOutputPort("filtered", 2 + N_JOINTS, self._calc_filtered, {self.xd_ticket()})
+        self.DeclareStateOutputPort("filtered", self._state)
 
     def start(self, context) -> None:
         """Starts the filter at rest at the context's time (a run's reset)."""
@@ -126,10 +126,6 @@ class ReflexMonitor(LeafSystem):
         if trip is not None:
             return EventStatus.ReachedTermination(self, f"collision reflex ({trip.cause})")
         return EventStatus.Succeeded()
-
-    def _calc_filtered(self, context, output):
-        x = context.get_discrete_state(self._state).get_value()
-        output.SetFromVector(np.r_[x[_F], x[_TAU], x[_PEAK]])
 
 
 class RobotSceneContactForce(LeafSystem):
