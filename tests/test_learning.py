@@ -98,3 +98,23 @@ def test_resume_after_an_interruption_reproduces_the_uninterrupted_run(tmp_path_
     assert learned.info["learning"]["method"] == "pi2-es-cov"
     # The search moved: the learned weights are not the initial ones.
     assert not np.array_equal(learned.initial_weights, Skill.load(shared["skill_dir"]).initial_weights)
+
+
+def test_greedy_every_runs_greedy_executions_after_every_nth_update_and_the_last(tmp_path_factory, tmp_path):
+    """PoWER's thesis budget: 30 updates of 1 rollout, a greedy execution every 6 (here 3 updates, every 2)."""
+    shared = shared_skill(tmp_path_factory)
+    config = LearnConfig(method="power", episodes=3, rollouts=1, held_out=0, seed=5, greedy_every=2)
+    outcome = learn(shared["skill_dir"], tmp_path / "run", config, station_config=shared["station"],
+                    rollout_config=rollout_config(), replay=False, progress=False)
+    curve = outcome.summary["curve"]
+    assert [c["episode"] for c in curve] == [0, 2, 3]
+    records = [json.loads(line) for line in (tmp_path / "run" / "results.jsonl").read_text().splitlines()]
+    assert [r["episode"] for r in records if r["type"] == "greedy"] == [0, 2, 3]
+    rewards = {r["episode"]: r["reward"] for r in records if r["type"] == "rollout"}
+    assert sorted(rewards) == [1, 2, 3]
+    # Episode 2's row sums the block of updates 1 and 2; episode 3's is its own.
+    assert curve[1]["mean_return"] == pytest.approx((rewards[1] + rewards[2]) / 2)
+    assert curve[1]["best_return"] == max(rewards[1], rewards[2])
+    assert curve[2]["mean_return"] == pytest.approx(rewards[3])
+    with pytest.raises(ValueError, match="greedy_every"):
+        LearnConfig(greedy_every=0).validate()

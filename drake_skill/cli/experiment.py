@@ -13,8 +13,7 @@ method, reward) gets ``--runs`` learning runs (seeds ``seed0 + r``), each one
 call of ``drake-skill learn``'s loop with one worker inside, several runs at
 a time on worker processes (default one per CPU) or on Ray. Budgets: E x C
 (default 5 x 6) with a greedy execution before learning and after every
-update; PoWER E*C x 1 (it gets a greedy execution after every update, so 31
-of them: learn has no "greedy every C"; the report reads every C-th).
+update; PoWER E*C x 1 with a greedy execution every C updates (thesis 7.1).
 
 Each run is stored the moment it ends (``OUT/SKILL/METHOD/REWARD/run_RRR/``
 with ``summary.json``, renamed into place whole); a second invocation skips

@@ -13,10 +13,8 @@ goal model); run ``r`` of every cell uses seed ``seed0 + r`` (the same object
 poses for its rollouts in every cell: the methods are compared on the same
 draws). Budgets: E episodes x C rollouts (thesis 5 x 6), a greedy execution
 before learning and after every update; PoWER E x C episodes of one rollout
-(thesis 30 x 1). ``learn`` runs a greedy execution after every update, so
-PoWER's runs have one after each of its 30 rollouts, not one every 6 as the
-thesis's: the table keeps them all with the rollouts used, and the report
-reads PoWER's curve at multiples of C.
+(thesis 30 x 1) with a greedy execution every C updates (``LearnConfig.
+greedy_every``), so every curve has its points after 0, C, 2C, ... rollouts.
 
 A run executes in a worker (:mod:`~drake_skill.experiments.pool`) with
 ``workers=1`` inside: ``learn`` on the worker's own runner, built once per
@@ -114,8 +112,9 @@ class GridConfig:
     def learn_config(self, method: str, reward: str, run: int) -> LearnConfig:
         """``learn``'s settings of run ``run`` of a cell (held-out off: the grid measures it)."""
         episodes, rollouts = self.budget(method)
+        every = int(self.rollouts) if method == "power" else 1
         return LearnConfig(method=method, reward=reward, episodes=episodes, rollouts=rollouts,
-                           seed=int(self.seed0) + int(run), held_out=0).validate()
+                           seed=int(self.seed0) + int(run), held_out=0, greedy_every=every).validate()
 
     def settings(self) -> dict[str, Any]:
         """What decides the numbers of a run beyond its cell (kept in ``grid.json``)."""
@@ -171,7 +170,8 @@ class GridTask:
         if self.kind == "before":
             return self.held_out
         episodes, rollouts = int(self.learn["episodes"]), int(self.learn["rollouts"])
-        return episodes * rollouts + episodes + 1 + self.held_out
+        greedy = -(-episodes // int(self.learn.get("greedy_every", 1))) + 1
+        return episodes * rollouts + greedy + self.held_out
 
 
 # ----------------------------------------------------------------------- in a worker

@@ -3,9 +3,9 @@
 Curves (thesis Fig. 7.1): per cell (skill, method, reward), the greedy
 success of each run at episodes 0..E, where episode k is the greedy
 execution after k x C rollouts (C: the rollouts of an episode of the budget,
-6 in the thesis). PoWER updates after every rollout and the table holds a
-greedy execution after each; its curve takes those after k x C rollouts,
-the thesis's "greedy every 6". Mean over the runs with a band of one
+6 in the thesis). PoWER updates after every rollout and is executed greedily
+after every C-th update (the thesis's "greedy every 6"); a table that holds
+more of its greedy executions gives its curve those after k x C rollouts. Mean over the runs with a band of one
 standard deviation (clipped to [0, 1]).
 
 Area under the curve (AUC): per run, the trapezoid area under its greedy

@@ -92,6 +92,24 @@ def exploration_scales_text() -> str:
 def _valid_exploration_scale(value) -> bool:
     """An exploration scale is a finite factor in (0, 100] on Sigma_b^0."""
     return math.isfinite(value) and 0 < value <= 100
+
+
+def _block_row(records, episode: int, every: int, exploration_at: dict, mean) -> dict:
+    """The curve row of update ``episode``: its rollouts and those of the updates since the last greedy one.
+
+    With a greedy execution after every update (``every`` = 1) the block is
+    the episode's own rollouts; PoWER's 30 x 1 with one every 6 sums 6 of them.
+    """
+    first = ((episode - 1) // every) * every + 1
+    block = [r for r in records if r["type"] == "rollout" and first <= r["episode"] <= episode]
+    returns = [r["reward"] for r in block]
+    return {"episode": episode, "mean_return": float(np.mean(returns)), "best_return": float(np.max(returns)),
+            "exploration": exploration_at[first],
+            "failures": dict(Counter(r["reason"] for r in block if r["failed"])),
+            "rollout_successes": int(sum(r["success"] for r in block)),
+            "ik_warnings": int(sum(r["ik_warnings"] for r in block)), "mean": np.asarray(mean).tolist()}
+
+
 _CHECKPOINT_FORMAT = 2
 
 #: Greedy executions wait until this many are due and then run beside the next
@@ -115,6 +133,10 @@ class LearnConfig:
     seed: policy search and pose seeds.
     held_out: greedy success over this many held-out poses before and after
       learning (0: off); held_out_seed0: their first seed.
+    greedy_every: a greedy execution before learning and after every
+      ``greedy_every``-th update and the last (thesis 7.1: 1, PoWER's 30 x 1
+      runs every 6). Greedy executions do not touch the search: the curve's
+      other points are the same whatever this is.
     exploration_scale: sigma_0 of thesis Eq. 5.3: the first episode samples
       ``w_b ~ N(w_b, exploration_scale * Sigma_b^0)`` (every method starts
       from that covariance; the covariance floor follows it). None: the
@@ -131,6 +153,7 @@ class LearnConfig:
     held_out: int = 10
     held_out_seed0: int = HELD_OUT_SEED0
     exploration_scale: float | None = None
+    greedy_every: int = 1
 
     def validate(self) -> "LearnConfig":
         def bad(field, value, expected):
@@ -149,6 +172,8 @@ class LearnConfig:
         min_rollouts = 2 if self.method == "cma-es" else 1
         if int(self.rollouts) < min_rollouts:
             bad("rollouts", self.rollouts, f"at least {min_rollouts} per episode for {self.method}")
+        if int(self.greedy_every) < 1:
+            bad("greedy_every", self.greedy_every, "at least 1 (a greedy execution after every n-th update)")
         if int(self.held_out) < 0:
             bad("held_out", self.held_out, "0 (off) or a number of poses")
         if self.exploration_scale is not None and not _valid_exploration_scale(self.exploration_scale):
@@ -549,6 +574,7 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
         for row in curve:
             _print(_table_row(row), file=stream)
         ran = 0
+        exploration_at = {r["episode"]: r["exploration"] for r in records if "exploration" in r and r["type"] == "rollout"}
         # Each batch: an episode's rollouts, and beside them the greedy
         # executions of earlier updates once GREEDY_BATCH of them are due
         # (pending; each needs only its update's mean, kept with it). A
@@ -569,7 +595,7 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
             n_pooled = len(tasks)
             if rollouts_now:
                 episode = search.episode + 1
-                exploration = exploration_size(search)
+                exploration_at[episode] = exploration_size(search)
                 samples = search.ask(config.rollouts)
                 seeds = [pose_seed(config.seed, episode, c) for c in range(config.rollouts)]
                 tasks += list(zip(samples, seeds))
@@ -598,13 +624,11 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
                 returns = episode_rewards(results, config.reward, False)
                 for c, r in enumerate(results):
                     records.append({"type": "rollout", "episode": episode, "index": c,
-                                    "reward": float(returns[c]), **r.summary()})
-                pending.append({"episode": episode, "mean_return": float(np.mean(returns)),
-                                "best_return": float(np.max(returns)), "exploration": exploration,
-                                "failures": dict(Counter(r.reason for r in results if r.failed)),
-                                "rollout_successes": int(sum(r.success for r in results)),
-                                "ik_warnings": int(sum(r.ik_warnings for r in results)),
-                                "mean": search.mean.tolist()})
+                                    "reward": float(returns[c]), "exploration": exploration_at[episode],
+                                    **r.summary()})
+                if episode % int(config.greedy_every) == 0 or episode == config.episodes:
+                    pending.append(_block_row(records, episode, int(config.greedy_every), exploration_at,
+                                              search.mean))
                 ran += 1
             save_checkpoint()
 
