@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	@touch $(STAMP)
 
 demo: setup
-	$(VENV)/bin/drake-skill learn --force
+	$(VENV)/bin/drake-skill learn --skill open --force
 
 test: setup
 	$(PY) -m pytest -q

@@ -1,14 +1,11 @@
-"""What every box shares, with no Drake import: the skill names, the size of an
-object cloud, the camera's look-at pose, the counter of differential-IK warnings."""
+"""What every box shares, with no Drake import: the size of an object cloud, the
+camera's look-at pose, the counter of differential-IK warnings."""
 
 from __future__ import annotations
 
 import logging
 
 import numpy as np
-
-#: The skills of the thesis (section 6): Open and Close a lidded box, Draw a drawer.
-SKILLS = ("open", "close", "draw")
 
 #: Points per segmented object cloud, the PCAE's input size N (docs/method.md section 3).
 N_POINTS = 2048

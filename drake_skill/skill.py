@@ -43,21 +43,19 @@ from drake_skill.action.dmp import Dmp, DmpConfig, fit_demonstrations
 from drake_skill import fileio
 from drake_skill.perception.features import GoalFeatures, GoalFeaturesConfig
 from drake_skill.reward.pomrp import Pomrp, PomrpConfig, fit_pomrp
-from drake_skill.common import SKILLS
+from drake_skill.skills import SkillSpec, load_skill
 from drake_skill.station.limits import FINGER_MAX
 
-SCHEMA_VERSION = 4
-
-# Thesis Table 6.1 (simulation: Open 20, Close 10; real robot: Draw 9).
-DEFAULT_BASES = {"open": 20, "close": 10, "draw": 9}
-
+SCHEMA_VERSION = 5
 
 @dc.dataclass
 class SkillConfig:
     """Everything ``fit_skill`` needs (loadable with ``yaml_load_typed``).
 
-    skill: "open", "close" or "draw".
-    dmp: DMP hyper-parameters (n_basis defaults per skill, thesis Table 6.1).
+    skill: the skill's name (``spec.name``).
+    spec: the skill file it was fitted for (docs/skills.md): its scenario,
+      success rule, exploration scale and gripper opening travel with it.
+    dmp: DMP hyper-parameters (n_basis: the skill file's ``dmp_bases``).
     dmp_ridge: relative ridge of Sigma_b^0 (``drake_skill.action.dmp.exploration_covariance``).
     seed: picks the demonstration whose DMP starts policy search.
     goal_features: PCA size (8).
@@ -70,7 +68,8 @@ class SkillConfig:
       before schema version 3).
     """
 
-    skill: str = "open"
+    skill: str = ""
+    spec: SkillSpec = dc.field(default_factory=SkillSpec)
     dmp: DmpConfig = dc.field(default_factory=DmpConfig)
     dmp_ridge: float = 0.1
     seed: int = 0
@@ -83,11 +82,11 @@ class SkillConfig:
 CLOUD_FRAMES = ("object", "world")
 
 
-def default_skill_config(skill: str) -> SkillConfig:
-    """SkillConfig with the thesis' number of DMP bases for ``skill``."""
-    if skill not in SKILLS:
-        raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
-    return SkillConfig(skill=skill, dmp=DmpConfig(n_basis=DEFAULT_BASES[skill]))
+def default_skill_config(skill) -> SkillConfig:
+    """SkillConfig of a skill (a shipped skill's name, a skill file or a SkillSpec),
+    with the skill file's number of DMP bases."""
+    spec = load_skill(skill)
+    return SkillConfig(skill=spec.name, spec=spec, dmp=DmpConfig(n_basis=int(spec.dmp_bases)))
 
 
 def _pcae_path(config: SkillConfig) -> Path:
@@ -160,6 +159,15 @@ class Skill:
     @property
     def name(self) -> str:
         return self.config.skill
+
+    @property
+    def spec(self) -> SkillSpec:
+        """The skill file the skill was fitted for."""
+        return self.config.spec
+
+    def station_config(self):
+        """The skill's scenario with its success rule (a fresh StationConfig)."""
+        return self.config.spec.station_config()
 
     @property
     def initial_dmp(self) -> Dmp:
@@ -326,7 +334,7 @@ class Skill:
 
 
 _SKILL_FILES = ("pcae.safetensors", "arrays.npz", "skill.yaml")
-_READABLE_VERSIONS = (1, 2, 3, 4)
+_READABLE_VERSIONS = (1, 2, 3, 4, 5)
 
 
 def _check_checksums(directory: Path, meta: dict, version: int) -> None:
@@ -361,8 +369,16 @@ def _load_config(path: Path, version: int) -> SkillConfig:
         config = yaml_load_typed(schema=SkillConfig, filename=str(path), defaults=defaults)
     except RuntimeError as e:
         raise ValueError(f"{path}: {e}") from e
-    if config.skill not in SKILLS:
-        raise ValueError(f"{path}: field 'skill' is {config.skill!r}; expected one of {', '.join(SKILLS)}")
+    if not config.spec.name:
+        # Skills fitted before skill files (schema version 4) name a shipped skill.
+        try:
+            config.spec = load_skill(config.skill)
+        except FileNotFoundError as e:
+            raise ValueError(f"{path}: field 'skill' is {config.skill!r}, not a shipped skill, and the file "
+                             "holds no 'spec'; fit the skill again from its skill file") from e
+    if config.spec.name != config.skill:
+        raise ValueError(f"{path}: field 'skill' is {config.skill!r} but 'spec.name' is {config.spec.name!r}; "
+                         "the file was edited; fit the skill again")
     if config.cloud_frame not in CLOUD_FRAMES:
         raise ValueError(f"{path}: field 'cloud_frame' is {config.cloud_frame!r}; expected one of "
                          f"{', '.join(CLOUD_FRAMES)}")
@@ -472,7 +488,8 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
     """Fits a skill from demonstrations (objects with ``times``, ``X_OE``,
     ``object_points``, ``perception_valid``, e.g. ``drake_skill.demos.format.Demonstration``).
     """
-    config = config if config is not None else default_skill_config("open")
+    if config is None:
+        config = default_skill_config(getattr(demos[0], "skill", "")) if len(demos) else SkillConfig()
     if len(demos) < 2:
         raise ValueError(f"demos: need at least 2 demonstrations of '{config.skill}', got {len(demos)}")
     if config.cloud_frame not in CLOUD_FRAMES:
@@ -523,7 +540,8 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
                        if isinstance(getattr(d, "metadata", None), dict) else f"demo {i}"
                        for i, d in enumerate(demos)],
     }
+    opening = config.spec.gripper_opening
     skill = Skill(config, fit.dmps, fit.initial_index, fit.sigma0, pca, pomrp, weights, info,
-                  gripper_opening(demos))
+                  gripper_opening(demos) if opening is None else float(opening))
     skill._encoder = encoder
     return skill

@@ -18,7 +18,8 @@ from drake_skill.demos.demonstrator import (
 )
 from drake_skill.perception.systems import ObjectSegmenter, segmenter_config_for_station
 from drake_skill.station.pose_source import hold_plan
-from drake_skill.station.scripted import keyframes, scripted_plan
+from drake_skill.skills import keyframes, load_skill
+from drake_skill.station.scripted import scripted_plan
 from drake_skill.station.simulation import StationSimulation
 from drake_skill.station.config import scenario_for_skill
 
@@ -49,7 +50,7 @@ def test_humanlike_plan_is_seeded_and_varies():
     assert not np.allclose(a.times[-1], c.times[-1])
     # A pause (a repeated pose) and the overshoot keyframe are in the plan.
     assert va["pause_after_keyframe"] >= 0 and 0.2 <= va["pause_s"] <= 0.8
-    assert a.times.size == len(keyframes("open")) + 3     # home, overshoot, pause
+    assert a.times.size == len(keyframes(load_skill("open"))) + 3     # home, overshoot, pause
     overshoot = a.positions[1]
     target = a.positions[2]
     assert np.linalg.norm(overshoot - target) == pytest.approx(va["overshoot_m"], abs=1e-9)
@@ -66,8 +67,9 @@ def test_humanlike_plan_is_seeded_and_varies():
 def test_config_loads_from_yaml_and_rejects_bad_fields():
     config = load_demonstrator_config(data="{count: 4, path_noise: 0.001, pause_range: [0.1, 0.3]}")
     assert (config.count, config.path_noise, config.pause_range) == (4, 0.001, [0.1, 0.3])
-    assert config.count_for("open") == 4 and DemonstratorConfig().count_for("open") == 3
-    assert DemonstratorConfig().count_for("close") == 2 and DemonstratorConfig().count_for("draw") == 2
+    skill = {name: load_skill(name) for name in ("open", "close", "draw")}
+    assert config.count_for(skill["open"]) == 4 and DemonstratorConfig().count_for(skill["open"]) == 3
+    assert DemonstratorConfig().count_for(skill["close"]) == 2 and DemonstratorConfig().count_for(skill["draw"]) == 2
     with pytest.raises(ValueError, match="'time_scale_range' = 1.5"):
         load_demonstrator_config(data="{time_scale_range: 1.5}")
     with pytest.raises(ValueError, match="'follow_through_range' = \\[0.5, 1.5\\]"):
@@ -84,7 +86,7 @@ def test_recorded_demonstration_succeeds_in_object_frame(skill, first_seed, tmp_
     [demo] = demonstrator.record_many(progress=False)
     sim = demonstrator.sim
     # Success by the ground-truth judge, on the recorded seed (retries are listed).
-    assert demo.success and sim.judge(skill, demo.final_object_state)
+    assert demo.success and sim.judge(demo.final_object_state)
     assert demo.seed == first_seed + len(demo.metadata["rejected_seeds"])
     assert demo.final_object_state == demo.object_state_100hz[-1] == pytest.approx(sim.object_state())
     n = demo.times_100hz.size

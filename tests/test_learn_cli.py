@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from drake_skill.cli.main import main
-from drake_skill.learning.loop import ARTIFACTS, EXPLORATION_SCALES, HELD_OUT_SEED0, plot_outcomes_by_placement
+from drake_skill.learning.loop import ARTIFACTS, HELD_OUT_SEED0, plot_outcomes_by_placement
+from drake_skill.skills import load_skill
 from drake_skill.skill import Skill
 from drake_skill.station.builder import Station
 from pydrake.math import RollPitchYaw
@@ -34,7 +35,7 @@ def test_learn_writes_every_artifact(learned, capsys):
     assert [c["episode"] for c in summary["curve"]] == [0, 1]
     # No --exploration-scale: the skill's default, saved as the number used.
     name = Skill.load(shared["skill_dir"]).name
-    assert json.loads((out / "config.json").read_text())["learn"]["exploration_scale"] == EXPLORATION_SCALES[name]
+    assert json.loads((out / "config.json").read_text())["learn"]["exploration_scale"] == load_skill(name).exploration_scale
     assert summary["n_rollouts"] == 2
     records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
     # Seed 5: the greedy execution succeeds on its pose before learning and fails after
@@ -100,7 +101,7 @@ def test_learn_refuses_to_overwrite_and_to_resume_nothing(learned, tmp_path, cap
 def test_evaluate_the_learned_skill(learned, capsys):
     shared, out, _ = learned
     capsys.readouterr()
-    assert main(["evaluate", "--skill", str(out / "skill"), "--station-config", str(shared["station_yaml"]),
+    assert main(["evaluate", "--skill-dir", str(out / "skill"), "--station-config", str(shared["station_yaml"]),
                  "--poses", "2", "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["learned"] and report["seeds"] == [900000, 900001]
@@ -138,14 +139,14 @@ def test_evaluate_explore_reports_the_spread_of_exploratory_returns(learned, cap
     shared, _, _ = learned
     capsys.readouterr()
     out = tmp_path / "exploration.json"
-    assert main(["evaluate", "--skill", str(shared["skill_dir"]), "--station-config", str(shared["station_yaml"]),
+    assert main(["evaluate", "--skill-dir", str(shared["skill_dir"]), "--station-config", str(shared["station_yaml"]),
                  "--explore", "2", "--out", str(out), "--json"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report == json.loads(out.read_text())
     assert report["seeds"] == [900000, 900001] and len(report["returns"]) == 2
     assert len(report["object_poses"]) == 2 and report["object_poses"][0] != report["object_poses"][1]
     assert out.with_suffix(".png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert report["exploration_scale"] == EXPLORATION_SCALES[Skill.load(shared["skill_dir"]).name]
+    assert report["exploration_scale"] == Skill.load(shared["skill_dir"]).spec.exploration_scale
     spread = report["return_spread"]
     assert spread["min"] == min(report["returns"]) and spread["max"] == max(report["returns"])
     assert spread["min"] <= spread["median"] <= spread["max"]
@@ -155,4 +156,4 @@ def test_evaluate_explore_reports_the_spread_of_exploratory_returns(learned, cap
     ran = [reason == "" for reason in report["reasons"]]
     assert any(ran)
     assert all((r > 0.0) == ok and (ok or r == 0.0) for r, ok in zip(report["returns"], ran)), report
-    assert main(["evaluate", "--skill", str(shared["skill_dir"]), "--explore", "-1"]) == 2
+    assert main(["evaluate", "--skill-dir", str(shared["skill_dir"]), "--explore", "-1"]) == 2

@@ -6,8 +6,8 @@ import types
 import numpy as np
 import pytest
 
-from drake_skill.learning.loop import (LearnConfig, default_exploration_scale, episode_rewards, learn,
-                                      pose_seed)
+from drake_skill.learning.loop import LearnConfig, episode_rewards, learn, pose_seed
+from drake_skill.skills import load_skill
 from drake_skill.skill import Skill
 
 from learning_support import rollout_config, shared_skill
@@ -47,11 +47,9 @@ def test_learn_config_errors_name_the_field():
 
 
 def test_exploration_scale_defaults_per_skill():
-    # docs/method.md section 5: Open a tenth of Sigma_0, Close the thesis' sigma_0 = 1.
+    # docs/method.md section 5: Open a tenth of Sigma_0, Close the thesis' sigma_0 = 1 (their skill files).
     assert LearnConfig().exploration_scale is None
-    assert default_exploration_scale("open") == 0.1 and default_exploration_scale("close") == 1.0
-    with pytest.raises(ValueError, match="exploration"):
-        default_exploration_scale("pour")
+    assert load_skill("open").exploration_scale == 0.1 and load_skill("close").exploration_scale == 1.0
 
 
 def _numbers(records):

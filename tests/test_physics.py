@@ -44,7 +44,7 @@ def test_lid_falls_by_its_weight_across_the_tipping_angle(box_sim, offset_deg, f
         assert np.all(log.object_state[-20:] > 1.85)
     else:
         assert log.final_object_state < 0.02                              # shut
-    assert box_sim.judge("open") == falls_open
+    assert box_sim.judge() == falls_open
 
 
 def test_arm_holds_home_for_60_s_with_the_gripper_commanded_closed(box_sim):
@@ -219,11 +219,11 @@ def test_scripted_skills_succeed_on_10_seeds_below_the_reflex_and_parked_fails(s
         X_WO = sim.reset(seed)
         plan = scripted_plan(skill, X_WO, sim.home_pose())
         log = sim.run(plan, plan.duration + sim.config.success.settle_time, record_hz=20)
-        assert sim.judge_log(skill, log), f"{skill} seed {seed}: final {log.final_object_state:.3f}"
+        assert sim.judge_log(log), f"{skill} seed {seed}: final {log.final_object_state:.3f}"
         assert log.peak_force < limit
     sim.reset(3)
     log = sim.run(None, 4.0, record_hz=10)
-    assert not sim.judge_log(skill, log)
+    assert not sim.judge_log(log)
     assert np.ptp(log.object_state) < 1e-3
 
 

@@ -69,11 +69,11 @@ def test_scripted_motion_succeeds_and_parked_fails(skill):
         X_WO = sim.reset(seed)
         plan = scripted_plan(skill, X_WO, sim.home_pose())
         log = sim.run(plan, plan.duration + sim.config.success.settle_time, record_hz=20)
-        assert sim.judge_log(skill, log), f"{skill} seed {seed}: final object state {log.final_object_state:.3f}"
-        assert judge_success(skill, log.final_object_state, sim.config.success)
+        assert sim.judge_log(log), f"{skill} seed {seed}: final object state {log.final_object_state:.3f}"
+        assert judge_success(log.final_object_state, sim.config.success)
     sim.reset(3)
     log = sim.run(None, 4.0, record_hz=10)   # the hand holds its home pose
-    assert not sim.judge_log(skill, log), f"{skill} judged a success with the arm parked"
+    assert not sim.judge_log(log), f"{skill} judged a success with the arm parked"
     assert np.ptp(log.object_state) < 1e-6
 
 
@@ -169,7 +169,10 @@ def test_object_state_port_reports_lid_angle():
     ("contact: {lid: {friction: .nan}}", "contact.lid.friction"),
     ("camera: {focal: !FovDegrees {x: 200.0, y: 43.0}}", "camera.focal.x"),
     ("camera: {fps: 0.0}", "camera.fps"),
-    ("success: {open_min: .nan}", "success.open_min"),
+    ("success: {open_min: 1.7}", "open_min"),
+    ("success: {joint: lid_hinge, above: .nan}", "success.above"),
+    ("success: {joint: lid_hinge, above: 1.0, below: 0.5}", "success.above/below"),
+    ("success: {joint: drawer_slide, above: 0.1}", "success.joint"),
 ])
 def test_bad_config_names_the_field(yaml_text, field):
     import re
@@ -190,12 +193,14 @@ def test_config_yaml_round_trip(tmp_path):
 
 
 def test_shipped_scenarios_are_yaml_files_in_the_package():
-    from drake_skill.station.config import dump_station_config, scenario_path
+    from drake_skill.skills import load_skill
+    from drake_skill.station.config import dump_station_config
     for skill, kind, x, joint in (("open", "box", 0.60, 0.0), ("close", "box", 0.46, 1.9),
                                   ("draw", "drawer", 0.68, 0.0)):
-        path = scenario_path(skill)
+        path = load_skill(skill).scenario_path()
         assert path.parent.name == "scenarios" and path.suffix == ".yaml" and path.is_file()
         config = scenario_for_skill(skill)
+        assert config.success == load_skill(skill).success    # the skill's rule, not the scene's
         assert (config.object.kind, config.object.x, config.object.initial_joint) == (kind, x, joint)
         assert config.object.gravity
         # The dump of a loaded scenario loads back to the same values.

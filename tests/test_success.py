@@ -5,10 +5,13 @@ contact force per sample, as the station's recorder gives them), so the
 settle rule is exercised by runs that must fail it.
 """
 
+import dataclasses as dc
+
 import numpy as np
 import pytest
 
 from drake_skill.station.config import SuccessConfig
+from drake_skill.skills import load_skill
 from drake_skill.station.success import TOUCH_FORCE_N, hand_left, judge_run, judge_success
 
 #: A 5 s Close recorded at 100 Hz: the lid shuts by 3 s. With the default 1 s
@@ -23,41 +26,50 @@ def _touching(first, last, force=5.0):
     return np.where((TIMES >= first - 1e-9) & (TIMES <= last + 1e-9), force, 0.0)
 
 
-def test_thresholds_of_each_skill():
-    config = SuccessConfig()
-    assert judge_success("open", config.open_min) and not judge_success("open", config.open_min - 1e-6)
-    assert judge_success("close", config.close_max) and not judge_success("close", config.close_max + 1e-6)
-    assert judge_success("draw", config.draw_min) and not judge_success("draw", config.draw_min - 1e-6)
-    with pytest.raises(ValueError, match="skill 'push'"):
-        judge_success("push", 0.0)
+def _rule(skill):
+    return load_skill(skill).success
+
+
+CLOSE = SuccessConfig(joint="lid_hinge", below=0.05)
+
+
+def test_thresholds_of_each_shipped_skill():
+    opened, closed, drawn = _rule("open"), _rule("close"), _rule("draw")
+    assert (opened.joint, closed.joint, drawn.joint) == ("lid_hinge", "lid_hinge", "drawer_slide")
+    assert (opened.above, closed.below, drawn.above) == (1.7, 0.05, 0.10)
+    assert judge_success(opened.above, opened) and not judge_success(opened.above - 1e-6, opened)
+    assert judge_success(closed.below, closed) and not judge_success(closed.below + 1e-6, closed)
+    assert judge_success(drawn.above, drawn) and not judge_success(drawn.above - 1e-6, drawn)
+    with pytest.raises(ValueError, match="no joint"):
+        judge_success(0.0, SuccessConfig())
 
 
 def test_a_hand_still_on_the_lid_in_the_settle_phase_fails():
     """The lid ends shut either way; only the run whose hand left before the settle phase succeeds."""
-    assert judge_success("close", SHUT[-1])
+    assert judge_success(SHUT[-1], CLOSE)
     left = _touching(1.0, 3.5)               # pushes the lid shut, lets go at 3.5 s
-    assert hand_left(TIMES, left) and judge_run("close", TIMES, SHUT, left)
+    assert hand_left(TIMES, left, CLOSE) and judge_run(TIMES, SHUT, left, CLOSE)
     held = _touching(1.0, 4.5)               # still holds the lid down at 4.0-4.5 s
-    assert not hand_left(TIMES, held) and not judge_run("close", TIMES, SHUT, held)
+    assert not hand_left(TIMES, held, CLOSE) and not judge_run(TIMES, SHUT, held, CLOSE)
     # One sample of contact anywhere in the settle phase is enough, the first and last included.
     for t in (4.01, 4.5, 5.0):
-        assert not judge_run("close", TIMES, SHUT, _touching(t, t)), t
+        assert not judge_run(TIMES, SHUT, _touching(t, t), CLOSE), t
     # Contact that ends with the sample before the settle phase does not count.
-    assert judge_run("close", TIMES, SHUT, _touching(1.0, 4.0))
+    assert judge_run(TIMES, SHUT, _touching(1.0, 4.0), CLOSE)
     # A lid left open fails however still the hand is.
-    assert not judge_run("close", TIMES, np.full_like(TIMES, 0.5), np.zeros_like(TIMES))
+    assert not judge_run(TIMES, np.full_like(TIMES, 0.5), np.zeros_like(TIMES), CLOSE)
 
 
 def test_the_settle_phase_is_the_last_settle_time_seconds():
     touch = _touching(1.0, 3.5)
-    assert judge_run("close", TIMES, SHUT, touch, SuccessConfig(settle_time=1.0))
-    assert not judge_run("close", TIMES, SHUT, touch, SuccessConfig(settle_time=2.0))   # from 3.0 s
+    assert judge_run(TIMES, SHUT, touch, dc.replace(CLOSE, settle_time=1.0))
+    assert not judge_run(TIMES, SHUT, touch, dc.replace(CLOSE, settle_time=2.0))   # from 3.0 s
     # Runs that do not start at 0 (a recorder anchored later): the phase is measured from the end.
-    assert judge_run("close", TIMES + 7.0, SHUT, touch) and not judge_run("close", TIMES + 7.0, SHUT,
-                                                                           _touching(1.0, 4.5))
+    assert judge_run(TIMES + 7.0, SHUT, touch, CLOSE) and not judge_run(TIMES + 7.0, SHUT, _touching(1.0, 4.5),
+                                                                         CLOSE)
 
 
 def test_touch_threshold():
     below = _touching(4.01, 5.0, force=0.5 * TOUCH_FORCE_N)
     above = _touching(4.01, 5.0, force=2.0 * TOUCH_FORCE_N)
-    assert judge_run("close", TIMES, SHUT, below) and not judge_run("close", TIMES, SHUT, above)
+    assert judge_run(TIMES, SHUT, below, CLOSE) and not judge_run(TIMES, SHUT, above, CLOSE)

@@ -34,7 +34,7 @@ def _run(sim, skill, seed):
     except RuntimeError as e:   # ReflexError, SolverError, DivergedError
         return {"success": False, "reason": getattr(e, "reason", "error"), "final": sim.object_state(),
                 "peak_force_N": float(getattr(e, "force_N", math.nan))}
-    return {"success": sim.judge_log(skill, log), "reason": "", "final": log.final_object_state,
+    return {"success": sim.judge_log(log), "reason": "", "final": log.final_object_state,
             "peak_force_N": log.peak_force}
 
 
@@ -58,7 +58,7 @@ def check_skill(skill, seeds, reflex):
             step_s = config.time_step
             sim.reset(seeds + 100)
             parked = sim.run(None, 4.0, record_hz=10)
-            parked_success = int(sim.judge_log(skill, parked))
+            parked_success = int(sim.judge_log(parked))
     chosen, ref = results["chosen"], results["1ms"]
     return step_s, {
         "seeds": seeds,

@@ -4,7 +4,7 @@
     python tools/imitation_success.py SKILL_DIR [--all-demos] [--poses 10] [--seed0 900000]
                                       [--ground-truth-pose] [--workers 1] [--json] [...]
 
-``drake-skill evaluate --skill SKILL_DIR --out SKILL_DIR/imitation.json``
+``drake-skill evaluate --skill-dir SKILL_DIR --out SKILL_DIR/imitation.json``
 under the name issue 10 gives it: every option after SKILL_DIR is
 evaluate's, with evaluate's defaults, which are the settings the
 imitation figures are reported in (the skill's initial policy, or with
@@ -35,7 +35,7 @@ def main(argv=None) -> int:
 
     from drake_skill.cli.main import command_main
 
-    return command_main("evaluate", ["--skill", str(args.skill_dir), *rest])
+    return command_main("evaluate", ["--skill-dir", str(args.skill_dir), *rest])
 
 
 if __name__ == "__main__":

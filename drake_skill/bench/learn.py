@@ -65,7 +65,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="drake-skill bench learn", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--skill", default="open", choices=("open", "close", "draw"))
+    parser.add_argument("--skill", default="open", metavar="SKILL")
     parser.add_argument("--skill-dir", type=Path, help="a fitted skill (default: fitted and cached)")
     parser.add_argument("--episodes", type=int, default=5)
     parser.add_argument("--rollouts", type=int, default=6)

@@ -142,7 +142,7 @@ def main(argv=None) -> int:
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--frames", type=int, default=20, help="station clouds to record")
     parser.add_argument("--repeats", type=int, default=3, help="passes over the recorded clouds")
-    parser.add_argument("--skill", default="open", choices=("open", "close", "draw"), help="station scenario")
+    parser.add_argument("--skill", default="open", metavar="SKILL", help="station scenario")
     parser.add_argument("--encode-frames", type=int, default=50, help="clouds for time_encode")
     args = parser.parse_args(argv)
     if min(args.frames, args.repeats, args.encode_frames) < 1:

@@ -343,7 +343,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="drake-skill bench rollout", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--skill", default="open", choices=("open", "close", "draw"))
+    parser.add_argument("--skill", default="open", metavar="SKILL")
     parser.add_argument("--seed", type=int, default=0, help="demonstrator seed of the fitted skill")
     parser.add_argument("--object-seed", type=int, default=3, help="object pose of the timed rollout")
     parser.add_argument("--cache", type=Path, default=DEFAULT_CACHE, help="where the fitted skill is kept")

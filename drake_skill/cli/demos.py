@@ -26,7 +26,6 @@ from pathlib import Path
 import numpy as np
 
 from drake_skill.cli import errors
-from drake_skill.common import SKILLS
 from drake_skill.fileio import write_figure_png
 
 NAME = "demos"
@@ -39,7 +38,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                          description=parser.description, formatter_class=argparse.RawDescriptionHelpFormatter)
     rec.add_argument("--verbose", action="store_true", default=argparse.SUPPRESS,
                      help="print tracebacks of errors and every differential-IK warning")
-    rec.add_argument("--skill", required=True, choices=SKILLS, help="the skill to demonstrate")
+    rec.add_argument("--skill", required=True, metavar="SKILL",
+                     help="the skill to demonstrate: a shipped skill's name (drake-skill skills) or a skill file")
     rec.add_argument("--count", type=int, default=0,
                      help="demonstrations to record (default: the thesis' 3 open, 2 close, 2 draw)")
     rec.add_argument("--out", type=Path, required=True, help="folder for demo_NNN.npz, demos.json and demos.png")
@@ -99,7 +99,7 @@ def _plot(demos, path: Path) -> Path:
     ax_xz.grid(alpha=0.3)
     ax_obj.set_title("object state (ground truth)")
     ax_obj.set_xlabel("time [s]")
-    ax_obj.set_ylabel("drawer travel [m]" if skill == "draw" else "lid angle [rad]")
+    ax_obj.set_ylabel("object joint [rad or m]")
     ax_obj.grid(alpha=0.3)
     ax_obj.legend(fontsize=8)
     fig.tight_layout()
@@ -120,7 +120,7 @@ def table(rows) -> str:
 
 
 def record(args) -> int:
-    from drake_skill.demos.demonstrator import DEFAULT_COUNTS, DemonstratorConfig, load_demonstrator_config
+    from drake_skill.demos.demonstrator import DemonstratorConfig, load_demonstrator_config
     from drake_skill.demos.format import existing_demo_files, save_demonstrations
 
     # Everything a user can get wrong is checked before the first simulation.
@@ -134,18 +134,19 @@ def record(args) -> int:
     if args.config:
         errors.input_file(args.config, "--config", "a YAML file of DemonstratorConfig fields")
     config = load_demonstrator_config(args.config) if args.config else DemonstratorConfig()
-    station_config = errors.station_config(args.skill, args.scenario) if args.scenario else None
-    count = args.count or config.count or DEFAULT_COUNTS[args.skill]
+    spec = errors.skill(args.skill)
+    station_config = errors.station_config(spec, args.scenario) if args.scenario else None
+    count = args.count or config.count or int(spec.demonstrations)
     seed = config.seed if args.seed is None else args.seed
     config = dc.replace(config, count=count, seed=seed, record_perception=not args.no_camera)
     if args.interactive:
         from drake_skill.demos.teleop import TeleopConfig, record_interactive
-        demos = record_interactive(args.skill, count, seed=seed,
+        demos = record_interactive(spec, count, seed=seed,
                                    config=TeleopConfig(record_perception=not args.no_camera),
                                    station_config=station_config)
     else:
         from drake_skill.demos.demonstrator import ScriptedDemonstrator
-        demos = ScriptedDemonstrator(args.skill, config, station_config=station_config).record_many(
+        demos = ScriptedDemonstrator(spec, config, station_config=station_config).record_many(
             progress=not args.quiet)
     paths = save_demonstrations(demos, args.out, force=args.force,
                                 extra=lambda tmp: _plot(demos, tmp / "demos.png"))

@@ -70,7 +70,19 @@ def load_yaml(schema, path: Path, option: str, defaults=None):
         raise ValueError(f"{option} {path}: {' '.join(str(e).split())}") from e
 
 
-def station_config(skill: str, scenario: Path | None):
+def skill(value, option: str = "--skill"):
+    """The SkillSpec of a shipped skill's name or a skill file's path (errors as one line)."""
+    from drake_skill.skills import load_skill
+
+    try:
+        return load_skill(value)
+    except FileNotFoundError as e:
+        raise FileNotFoundError(f"{option}: {e}") from None
+    except ValueError as e:
+        raise ValueError(f"{option}: {e}") from None
+
+
+def station_config(skill, scenario: Path | None):
     """The station of ``skill``: its shipped scenario, overridden by the user's ``--scenario`` YAML."""
     from drake_skill.station.config import load_station_config, scenario_for_skill
 

@@ -1,6 +1,6 @@
 """``drake-skill evaluate``: greedy success of a skill over held-out object poses.
 
-    drake-skill evaluate --skill DIR [--poses 10] [--seed0 900000] [--workers N]
+    drake-skill evaluate --skill-dir DIR [--poses 10] [--seed0 900000] [--workers N]
                          [--ground-truth-pose] [--all-demos | --explore N] [--out FILE] [--json]
 
 Executes the skill's policy without exploration (a fitted skill's initial
@@ -46,7 +46,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.add_argument("--skill", type=Path, required=True, help="a skill folder (drake-skill fit / learn)")
+    parser.add_argument("--skill-dir", type=Path, required=True, help="a fitted skill's folder (drake-skill fit / learn)")
     parser.add_argument("--poses", type=int, default=10, help="held-out object poses (default 10)")
     parser.add_argument("--seed0", type=int, default=HELD_OUT_SEED0,
                         help=f"seed of the first pose (default {HELD_OUT_SEED0}, as drake-skill learn)")
@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     from drake_skill.learning.loop import evaluate_skill, evaluation_table, plot_outcomes_by_placement
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.skill import Skill
-    from drake_skill.station.config import load_station_config, scenario_for_skill
+    from drake_skill.station.config import load_station_config
 
     if args.poses < 1:
         raise ValueError(f"--poses must be at least 1, got {args.poses}")
@@ -88,24 +88,23 @@ def run(args: argparse.Namespace) -> int:
         args.workers = default_workers()
     if args.workers < 1:
         raise ValueError(f"--workers must be at least 1, got {args.workers}")
-    if not args.skill.is_dir():
-        raise NotADirectoryError(f"--skill {args.skill}: not a folder; give a skill folder "
+    if not args.skill_dir.is_dir():
+        raise NotADirectoryError(f"--skill-dir {args.skill_dir}: not a folder; give a skill folder "
                                  "(drake-skill fit --out / drake-skill learn --out .../skill)")
     if args.explore < 0:
         raise ValueError(f"--explore must be a number of rollouts >= 1, got {args.explore}")
-    name = Skill.load(args.skill).name
-    station = scenario_for_skill(name)
+    station = Skill.load(args.skill_dir).station_config()
     if args.station_config is not None:
         station = load_station_config(args.station_config, defaults=station)
     rollout_config = RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived")
     if args.explore:
         from drake_skill.learning.loop import exploration_table, explore_skill
 
-        report = explore_skill(args.skill, rollouts=args.explore, seed0=args.seed0, station_config=station,
+        report = explore_skill(args.skill_dir, rollouts=args.explore, seed0=args.seed0, station_config=station,
                                rollout_config=rollout_config, workers=args.workers,
                                ray_address=args.ray_address, progress=not (args.quiet or args.json),
                                exploration_scale=args.exploration_scale)
-        out = args.out if args.out is not None else args.skill / "exploration.json"
+        out = args.out if args.out is not None else args.skill_dir / "exploration.json"
         atomic_write_json(out, report)
         plot = plot_outcomes_by_placement(report, _plot_path(out))
         print(json.dumps(report, sort_keys=True) if args.json else exploration_table(report))
@@ -113,10 +112,10 @@ def run(args: argparse.Namespace) -> int:
             print(f"wrote {out} and {plot}")
         return 0
     report = evaluate_skill(
-        args.skill, poses=args.poses, seed0=args.seed0, station_config=station,
+        args.skill_dir, poses=args.poses, seed0=args.seed0, station_config=station,
         rollout_config=rollout_config, workers=args.workers, ray_address=args.ray_address, all_demos=args.all_demos,
         progress=not (args.quiet or args.json))
-    out = args.out if args.out is not None else args.skill / "evaluation.json"
+    out = args.out if args.out is not None else args.skill_dir / "evaluation.json"
     atomic_write_json(out, report)
     plot = plot_outcomes_by_placement(report, _plot_path(out))
     if args.json:

@@ -60,7 +60,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_run_arguments(run_p: argparse.ArgumentParser) -> None:
-    from drake_skill.common import SKILLS
+    from drake_skill.skills import shipped_skill_names
     from drake_skill.experiments.grid import DEFAULT_RUNS
     from drake_skill.learning.loop import REWARDS
     from drake_skill.learning.policy_search import METHODS
@@ -68,7 +68,8 @@ def _add_run_arguments(run_p: argparse.ArgumentParser) -> None:
 
     grid = run_p.add_argument_group("grid")
     grid.add_argument("--skills", nargs="+", default=["open", "close"], metavar="SKILL",
-                      help=f"some of {', '.join(SKILLS)} (default open close)")
+                      help=f"shipped skills, some of {', '.join(shipped_skill_names())} (default open close: the "
+                           "thesis's simulation study)")
     grid.add_argument("--methods", nargs="+", default=list(METHODS), metavar="METHOD",
                       help=f"some of {', '.join(METHODS)} (default all)")
     grid.add_argument("--rewards", nargs="+", default=list(REWARDS), metavar="REWARD",

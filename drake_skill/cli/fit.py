@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 
 from drake_skill.cli import errors
-from drake_skill.common import SKILLS
 
 NAME = "fit"
 HELP = "fit a skill (DMPs + goal model) from demonstrations"
@@ -44,8 +43,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--demos", type=Path, required=True, help="folder of demo_*.npz files")
     parser.add_argument("--out", type=Path, required=True, help="skill folder to write")
     parser.add_argument("--config", type=Path, help="SkillConfig YAML (defaults: thesis values)")
-    parser.add_argument("--skill", choices=SKILLS,
-                        help="skill name (default: read from the demonstrations)")
+    parser.add_argument("--skill", metavar="SKILL",
+                        help="the skill: a shipped skill's name or a skill file (default: the shipped "
+                             "skill the demonstrations name)")
     parser.add_argument("--seed", type=int, help="picks the demonstration policy search starts from")
     parser.add_argument("--force", action="store_true", help="replace an existing skill in --out")
 
@@ -66,12 +66,14 @@ def run(args: argparse.Namespace) -> int:
     if args.config:  # parse errors and unknown keys before reading the demonstrations
         errors.load_yaml(SkillConfig, args.config, "--config").dmp.validate()
     demos = load_demonstrations(args.demos)
-    skill_name = args.skill or demos[0].skill
-    config = default_skill_config(skill_name)
+    spec = errors.skill(args.skill) if args.skill else errors.skill(
+        demos[0].skill, f"--demos {args.demos} (skill '{demos[0].skill}'; give its skill file as --skill)")
+    config = default_skill_config(spec)
     if args.config:
         config = errors.load_yaml(SkillConfig, args.config, "--config", defaults=config)
-        if args.skill and config.skill != args.skill:
-            raise ValueError(f"--config {args.config}: skill '{config.skill}' disagrees with --skill {args.skill}")
+        if config.skill != spec.name:
+            raise ValueError(f"--config {args.config}: skill '{config.skill}' disagrees with the skill "
+                             f"'{spec.name}'; fit it with --skill {config.skill}")
         config.dmp.validate()
     if args.seed is not None:
         config.seed = args.seed

@@ -1,6 +1,6 @@
 """``drake-skill hardware``: a skill on a real Panda through the drake-franka-driver's LCM.
 
-    drake-skill hardware run --skill DIR [--lcm-url URL] [--config hardware.yaml]
+    drake-skill hardware run --skill-dir DIR [--lcm-url URL] [--config hardware.yaml]
                              [--rollouts 1] [--seed0 0] [--episodes E] [--out DIR] [--yes]
     drake-skill hardware record-demo --skill open --out DIR [--lcm-url URL] [--config hardware.yaml]
                              [--duration 15] [--seed 0] [--yes]
@@ -45,15 +45,13 @@ HELP = "a skill on a real Panda over LCM: run (greedy or learning), record-demo 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from drake_skill.common import SKILLS
-
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     actions = parser.add_subparsers(dest="action", metavar="ACTION", title="actions")
     actions.required = True
     run_p = actions.add_parser("run", help="the skill's greedy policy (or --episodes: learning) on the robot",
                                description="Executes a skill on the robot with the simulation's rollout runner.")
-    run_p.add_argument("--skill", type=Path, required=True, help="a skill folder (drake-skill fit / learn)")
+    run_p.add_argument("--skill-dir", type=Path, required=True, help="a fitted skill's folder (drake-skill fit / learn)")
     run_p.add_argument("--rollouts", type=int, default=1, help="greedy rollouts (default 1); per episode with --episodes")
     run_p.add_argument("--seed0", type=int, default=0, help="object pose seed of the first rollout (default 0)")
     run_p.add_argument("--episodes", type=int, default=0, help="policy-search episodes (default 0: greedy only)")
@@ -62,7 +60,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run_p.add_argument("--out", type=Path, default=None, help="output folder (default SKILL/hardware_run)")
     demo_p = actions.add_parser("record-demo", help="record a kinesthetic demonstration",
                                 description="Records the measured hand path and camera while a person guides the arm.")
-    demo_p.add_argument("--skill", choices=SKILLS, required=True, help="the skill demonstrated")
+    demo_p.add_argument("--skill", required=True, metavar="SKILL",
+                        help="the skill demonstrated: a shipped skill's name or a skill file")
     demo_p.add_argument("--out", type=Path, required=True, help="demonstration folder (demo_NNN.npz)")
     demo_p.add_argument("--duration", type=float, default=15.0, help="recording length [s] (default 15)")
     demo_p.add_argument("--seed", type=int, default=0, help="object pose seed: where to place it (default 0)")
@@ -101,14 +100,14 @@ def _run(args) -> int:
         raise ValueError(f"--rollouts must be at least 1, got {args.rollouts}")
     if args.episodes < 0:
         raise ValueError(f"--episodes must be 0 (greedy only) or more, got {args.episodes}")
-    if not args.skill.is_dir():
-        raise NotADirectoryError(f"--skill {args.skill}: not a folder; give a skill folder (drake-skill fit --out)")
-    skill = Skill.load(args.skill)
+    if not args.skill_dir.is_dir():
+        raise NotADirectoryError(f"--skill-dir {args.skill_dir}: not a folder; give a skill folder (drake-skill fit --out)")
+    skill = Skill.load(args.skill_dir)
     config = load_config(args.config, args.lcm_url, skill.name)
     camera = config.station.enable_camera
     rollout = RolloutConfig(object_pose="perceived" if camera and not args.ground_truth_pose else "ground_truth",
                             goal_model=camera)
-    out = args.out if args.out is not None else args.skill / "hardware_run"
+    out = args.out if args.out is not None else args.skill_dir / "hardware_run"
     station = build_hardware_station(config)
     station.set_reset_hook(_prompt(not args.yes))
     runner = RolloutRunner(skill, config=rollout, station=station)
@@ -117,7 +116,7 @@ def _run(args) -> int:
     if args.episodes:
         from drake_skill.learning.loop import LearnConfig, learn
 
-        outcome = learn(args.skill, out, LearnConfig(episodes=args.episodes, rollouts=args.rollouts,
+        outcome = learn(args.skill_dir, out, LearnConfig(episodes=args.episodes, rollouts=args.rollouts,
                                                      seed=args.seed0, held_out=0),
                         station_config=config.station, rollout_config=rollout, runner=runner, replay=False)
         print(f"wrote {out} ({outcome!r:.200})")
@@ -136,7 +135,7 @@ def _run(args) -> int:
             print("stopped: the robot's status stopped or its reflex fired", file=sys.stderr)
             break
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(out / "hardware_run.json", {"skill": str(args.skill), "lcm_url": config.lcm_url,
+    atomic_write_json(out / "hardware_run.json", {"skill": str(args.skill_dir), "lcm_url": config.lcm_url,
                                                   "rollouts": results})
     print(f"wrote {out / 'hardware_run.json'}")
     return 0 if results and not any(r["failed"] for r in results) else 1
@@ -204,10 +203,11 @@ def _record_demo(args) -> int:
         v = np.asarray(recorder.X_WO_perceived, dtype=float)
         X_WO = RigidTransform(Quaternion(v[3:] / np.linalg.norm(v[3:])), v[:3])
     from drake_skill.station.success import judge_success
-    success = judge_success(args.skill, float(obj[-1]), config.station.success)
+    success = judge_success(float(obj[-1]), config.station.success)
     metadata = {"source": "kinesthetic", "lcm_url": config.lcm_url,
                 "X_WO_note": "X_OE uses the perceived X_WO at the first frame (the placed pose without a camera)"}
-    demo = demonstration_from(recorder, args.skill, args.seed, X_WO, success, metadata)
+    from drake_skill.cli import errors
+    demo = demonstration_from(recorder, errors.skill(args.skill).name, args.seed, X_WO, success, metadata)
     args.out.mkdir(parents=True, exist_ok=True)
     path = save_demonstration(demo, demo_path(args.out, len(existing_demo_files(args.out))))
     print(f"wrote {path}: {demo.duration:.1f} s, final object state {demo.final_object_state:.3f}, "

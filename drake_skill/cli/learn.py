@@ -1,13 +1,13 @@
 """``drake-skill learn``: improve a skill by policy search on its learned reward (the main job).
 
-    drake-skill learn [--skill open] [--skill-dir DIR | --demos DIR] [--method pi2-es-cov]
+    drake-skill learn --skill SKILL | --skill-dir DIR | --demos DIR [--method pi2-es-cov] [--method pi2-es-cov]
                       [--reward dense] [--episodes 5] [--rollouts 6] [--seed 0] [--workers N]
                       [--held-out 10] [--out results/learn/SKILL] [--resume] [--meshcat]
 
 The skill comes from ``--skill-dir`` (a fitted skill, ``drake-skill fit``), or
 is fitted from ``--demos`` (``drake-skill demos record``), or, with neither,
-the scripted demonstrator records the thesis' demonstrations of ``--skill``
-(3 Open, 2 Close, 2 Draw) into ``OUT/demos/`` and the skill is fitted into
+the scripted demonstrator records ``--skill``'s demonstrations (its skill
+file's keyframes and count; the thesis's 3 Open, 2 Close, 2 Draw) into ``OUT/demos/`` and the skill is fitted into
 ``OUT/initial_skill/`` (reused when already there). Then (docs/method.md
 section 5) the held-out greedy success over ``--held-out`` object poses, one
 greedy execution, and ``--episodes`` updates of ``--rollouts`` rollouts each,
@@ -19,7 +19,7 @@ Writes into ``--out``:
     results.jsonl        one JSON object per line: held_out, greedy, rollout, episode records
     summary.json         greedy success per episode, held-out success before/after, failures
     learning_curve.png   greedy success and returns per episode
-    skill/               the learned skill (drake-skill evaluate --skill OUT/skill)
+    skill/               the learned skill (drake-skill evaluate --skill-dir OUT/skill)
     replay_first.html    Meshcat replay of the greedy execution before learning
     replay_last.html     ... and of the last one (open in a browser, press play)
     checkpoint/          search state after every episode (--resume continues from it)
@@ -35,7 +35,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from drake_skill.common import SKILLS
+from drake_skill.cli import errors
 
 NAME = "learn"
 HELP = "improve a skill by policy search on its learned reward (the main job)"
@@ -50,8 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     source = parser.add_argument_group("skill")
-    source.add_argument("--skill", choices=SKILLS, default=None,
-                        help="skill to learn (default open, or the skill of --skill-dir / --demos)")
+    source.add_argument("--skill", default=None, metavar="SKILL",
+                        help="the skill to learn: a shipped skill's name (drake-skill skills) or a skill "
+                             "file; needed unless --skill-dir or --demos of a shipped skill says it")
     source.add_argument("--skill-dir", type=Path, help="start from this fitted skill")
     source.add_argument("--demos", type=Path, help="fit the skill from these demonstrations (demo_*.npz)")
     search = parser.add_argument_group("policy search")
@@ -90,12 +91,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
-def _station_config(args, skill_name: str):
+def _station_config(args, skill):
     from drake_skill.station.config import load_station_config, scenario_for_skill
 
     if args.station_config is None:
-        return scenario_for_skill(skill_name)
-    return load_station_config(args.station_config, defaults=scenario_for_skill(skill_name))
+        return scenario_for_skill(skill)
+    return load_station_config(args.station_config, defaults=scenario_for_skill(skill))
 
 
 def _save_demos(demos, directory: Path) -> None:
@@ -114,16 +115,17 @@ def prepare_skill(args, out: Path) -> Path:
 
     if args.skill_dir is not None and args.demos is not None:
         raise ValueError("give --skill-dir or --demos, not both")
+    spec = errors.skill(args.skill) if args.skill is not None else None
     if args.skill_dir is not None:
         skill = Skill.load(args.skill_dir)      # errors name the file
-        if args.skill is not None and args.skill != skill.name:
+        if spec is not None and spec.name != skill.name:
             raise ValueError(f"--skill {args.skill} but {args.skill_dir} holds a '{skill.name}' skill")
         return args.skill_dir
     initial = out / "initial_skill"
     if (initial / "skill.json").is_file() and args.demos is None:
         skill = Skill.load(initial)
-        if args.skill is not None and args.skill != skill.name:
-            raise ValueError(f"{initial} holds a '{skill.name}' skill, not '{args.skill}'; use another --out")
+        if spec is not None and spec.name != skill.name:
+            raise ValueError(f"{initial} holds a '{skill.name}' skill, not '{spec.name}'; use another --out")
         print(f"using the skill fitted earlier: {initial}")
         return initial
     from drake_skill.demos.format import load_demonstrations
@@ -134,18 +136,23 @@ def prepare_skill(args, out: Path) -> Path:
             raise FileNotFoundError(f"{args.demos}: no demo_*.npz files; record some with "
                                     "'drake-skill demos record'")
         name = demos[0].skill
-        if args.skill is not None and args.skill != name:
+        if spec is not None and spec.name != name:
             raise ValueError(f"--skill {args.skill} but {args.demos} holds '{name}' demonstrations")
+        spec = spec if spec is not None else errors.skill(name, f"--demos {args.demos} (skill '{name}'; "
+                                                                "give its skill file as --skill)")
     else:
         from drake_skill.demos.demonstrator import ScriptedDemonstrator
 
-        name = args.skill or "open"
+        if spec is None:
+            raise ValueError("--skill: missing; name the skill to learn (a shipped skill: drake-skill skills, "
+                             "or a skill file), or give --skill-dir or --demos")
+        name = spec.name
         print(f"recording scripted demonstrations of '{name}' into {out / 'demos'} ...")
-        demonstrator = ScriptedDemonstrator(name, station_config=_station_config(args, name))
+        demonstrator = ScriptedDemonstrator(spec, station_config=_station_config(args, spec))
         demos = demonstrator.record_many(progress=not args.quiet)
         _save_demos(demos, out / "demos")
     print(f"fitting '{name}' from {len(demos)} demonstrations ...")
-    skill = fit_skill(demos, default_skill_config(name))
+    skill = fit_skill(demos, default_skill_config(spec))
     skill.save(initial, overwrite=True)
     print(skill.summary())
     return initial
@@ -167,12 +174,16 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--held-out must be 0 (off) or a number of poses, got {args.held_out}")
     if args.resume and args.force:
         raise ValueError("--resume continues a run and --force starts over: give one of them")
-    guessed = args.skill or (Skill.load(args.skill_dir).name if args.skill_dir else None)
-    out = args.out if args.out is not None else Path("results") / "learn" / (guessed or "open")
-    if args.out is None and guessed is None and args.demos is not None:
+    guessed = (errors.skill(args.skill).name if args.skill else
+               Skill.load(args.skill_dir).name if args.skill_dir else None)
+    if guessed is None and args.demos is not None:
         from drake_skill.demos.format import load_demonstrations
         demos = load_demonstrations(args.demos)
-        out = Path("results") / "learn" / (demos[0].skill if demos else "open")
+        guessed = demos[0].skill if demos else None
+    if guessed is None:
+        raise ValueError("--skill: missing; name the skill to learn (a shipped skill: drake-skill skills, "
+                         "or a skill file), or give --skill-dir or --demos")
+    out = args.out if args.out is not None else Path("results") / "learn" / guessed
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(f"--out {out} is a file; give a folder")
     if (out / "checkpoint" / "state.json").exists() and not (args.resume or args.force):
@@ -180,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
                               "start over, or choose another --out")
     out.mkdir(parents=True, exist_ok=True)
     skill_dir = prepare_skill(args, out)
-    skill_name = Skill.load(skill_dir).name
+    skill = Skill.load(skill_dir)
     config = LearnConfig(method=args.method, reward=args.reward, weighting=args.weighting or "",
                          episodes=args.episodes, rollouts=args.rollouts, seed=args.seed,
                          held_out=args.held_out, exploration_scale=args.exploration_scale)
@@ -190,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
         from pydrake.geometry import Meshcat
         meshcat = Meshcat()
         print(f"Meshcat: {meshcat.web_url()}")
-    outcome = learn(skill_dir, out, config, station_config=_station_config(args, skill_name),
+    outcome = learn(skill_dir, out, config, station_config=_station_config(args, skill.spec),
                     rollout_config=rollout, workers=args.workers, ray_address=args.ray_address,
                     use_ray=args.ray, resume=args.resume, force=args.force, meshcat=meshcat,
                     replay=not args.no_replay, progress=not args.quiet)

@@ -1,6 +1,6 @@
 """``drake-skill sim-robot``: a simulated Panda that speaks the drake-franka-driver's LCM protocol.
 
-    drake-skill sim-robot [--lcm-url URL] [--skill open] [--seed N] [--config hardware.yaml]
+    drake-skill sim-robot --skill SKILL [--lcm-url URL] [--seed N] [--config hardware.yaml]
                           [--no-camera] [--duration S] [--guide]
 
 Runs the simulated station in real time behind Drake's PandaCommandReceiver /
@@ -31,12 +31,11 @@ HELP = "a simulated Panda behind the driver's LCM protocol (for hardware run / r
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from drake_skill.common import SKILLS
-
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("--lcm-url", default=None, help="LCM URL (default: the config's, or LCM's default)")
-    parser.add_argument("--skill", choices=SKILLS, default="open", help="the scenario (default open)")
+    parser.add_argument("--skill", required=True, metavar="SKILL",
+                        help="the skill whose scenario the robot stands in (a shipped skill's name or a skill file)")
     parser.add_argument("--seed", type=int, default=None, help="object pose seed (default: the nominal pose)")
     parser.add_argument("--config", type=Path, help="HardwareConfig YAML (channels, URL, scenario)")
     parser.add_argument("--no-camera", action="store_true", help="no camera (faster; no images published)")
@@ -45,13 +44,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="play the skill's scripted demonstration on the arm (kinesthetic stand-in)")
 
 
-def load_config(path, lcm_url, skill: str, camera: bool = True):
+def load_config(path, lcm_url, skill, camera: bool = True):
     """The HardwareConfig of the CLI options (scenario from the skill unless the file names one)."""
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.cli import errors
     from drake_skill.station.hardware_config import HardwareConfig, load_hardware_config, validate_hardware_config
 
     defaults = HardwareConfig()
-    defaults.station = scenario_for_skill(skill)
+    defaults.station = errors.skill(skill).station_config()
     config = load_hardware_config(path, defaults=defaults) if path is not None else defaults
     if lcm_url is not None:
         config.lcm_url = lcm_url
@@ -67,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
     from drake_skill.station.sim_robot import SimRobot
 
-    robot = SimRobot(config, guide=args.skill if args.guide else None)
+    robot = SimRobot(config, guide=errors.skill(args.skill) if args.guide else None)
     url = config.lcm_url or "(LCM default)"
     print(f"sim-robot: {args.skill} scenario on {url}: commands {config.command_channel}, "
           f"status {config.status_channel}, hand {config.hand_command_channel}"

@@ -22,15 +22,10 @@ from pathlib import Path
 import numpy as np
 
 from drake_skill.cli import errors
-from drake_skill.common import SKILLS
 from drake_skill.fileio import atomic_write_json, write_figure_png
 
 NAME = "station-demo"
 HELP = "scripted Open/Close/Draw in the simulated station"
-
-THRESHOLD_TEXT = {"open": "lid >= {open_min:.2f} rad", "close": "lid <= {close_max:.2f} rad",
-                  "draw": "travel >= {draw_min:.2f} m"}
-
 
 def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, scenario: Path | None = None) -> dict:
     import matplotlib
@@ -39,7 +34,10 @@ def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, 
 
     from drake_skill.station.scripted import scripted_plan
     from drake_skill.station.simulation import StationSimulation
-    configs = {skill: errors.station_config(skill, scenario) for skill in skills}  # all checked first
+    from drake_skill.station.success import rule_text
+    skills = [errors.skill(skill, "--skills") for skill in skills]
+    configs = {spec.name: errors.station_config(spec, scenario) for spec in skills}  # all checked first
+    specs, skills = {spec.name: spec for spec in skills}, [spec.name for spec in skills]
     summary, logs = {}, {}
     for skill in skills:
         config = configs[skill]
@@ -47,19 +45,19 @@ def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, 
         sim.simulator.set_target_realtime_rate(realtime)
         start = time.perf_counter()
         X_WO = sim.reset(seed)
-        plan = scripted_plan(skill, X_WO, sim.home_pose())
+        plan = scripted_plan(specs[skill], X_WO, sim.home_pose())
         log = sim.run(plan, plan.duration + 0.5, record_hz=20)
-        success = sim.judge(skill)
+        success = sim.judge()
         image = sim.station.GetOutputPort("color_image").Eval(sim.station_context()).data[:, :, :3].copy()
         sim.reset(seed)
         parked = sim.run(None, 3.0, record_hz=20)
-        parked_success = sim.judge(skill)
+        parked_success = sim.judge()
         summary[skill] = {
             "seed": seed,
             "object_xy_yaw": [float(X_WO.translation()[0]), float(X_WO.translation()[1]),
                               float(np.arctan2(X_WO.rotation().matrix()[1, 0], X_WO.rotation().matrix()[0, 0]))],
             "final_object_state": log.final_object_state,
-            "threshold": THRESHOLD_TEXT[skill].format(**vars(config.success)),
+            "threshold": rule_text(config.success),
             "scripted_success": bool(success),
             "parked_success": bool(parked_success),
             "wall_s": round(time.perf_counter() - start, 2),
@@ -79,7 +77,7 @@ def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, 
         ax.plot(parked.times, parked.object_state, "--", label="parked")
         ax.set_title(f"{skill} ({'success' if summary[skill]['scripted_success'] else 'failure'})")
         ax.set_xlabel("time [s]")
-        ax.set_ylabel("drawer travel [m]" if skill == "draw" else "lid angle [rad]")
+        ax.set_ylabel(f"{configs[skill].success.joint} [rad or m]")
         ax.grid(alpha=0.3)
         ax.legend()
     fig.tight_layout()
@@ -90,8 +88,9 @@ def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, 
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--skills", nargs="+", default=list(SKILLS),
-                        choices=SKILLS, help="skills to run (default: all)")
+    parser.add_argument("--skills", nargs="+", default=None, metavar="SKILL",
+                        help="skills to run: shipped skills' names or skill files (default: every shipped "
+                             "skill with keyframes)")
     parser.add_argument("--seed", type=int, default=0, help="object pose seed (default 0)")
     parser.add_argument("--out", type=Path, default=Path("results/station_demo"),
                         help="output folder (default results/station_demo)")
@@ -103,6 +102,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     errors.output_folder(args.out, "--out", what="the demo's results")
+    if args.skills is None:
+        from drake_skill.skills import shipped_skills
+        args.skills = [spec.name for spec in shipped_skills() if spec.keyframes]
     if args.scenario is not None:
         for skill in args.skills:
             errors.station_config(skill, args.scenario)

@@ -1,7 +1,7 @@
-"""Scripted demonstrator: Open, Close and Draw shown in the simulated station.
+"""Scripted demonstrator: a skill's keyframes shown in the simulated station, as a person would.
 
 The simulation's stand-in for the thesis' kinesthetic demonstrations (section
-6.2: 3 Open, 2 Close, 2 Draw). The keyframes of ``drake_skill.station.scripted`` (in
+6.2: 3 Open, 2 Close, 2 Draw). A skill file's keyframes (``drake_skill.skills``, in
 the object frame O) are interpolated with human-like, seeded variation and
 played into the station; the demonstration records what a kinesthetic
 recording would:
@@ -52,18 +52,16 @@ from drake_skill.demos.format import Demonstration, downsample_action, object_fr
 from drake_skill.station.pose_source import PosePlan
 from drake_skill.station.simulation import ReflexError, StationRecorder, StationSimulation, pose_to_vector
 from drake_skill.station.success import judge_run
-from drake_skill.station.config import SKILLS, StationConfig, scenario_for_skill
-
-#: Thesis section 6.2: demonstrations per skill.
-DEFAULT_COUNTS = {"open": 3, "close": 2, "draw": 2}
+from drake_skill.skills import SkillSpec, keyframes, load_skill
+from drake_skill.station.config import StationConfig
 
 
 @dc.dataclass
 class DemonstratorConfig:
     """How the scripted demonstrator varies and records its demonstrations.
 
-    count: demonstrations to record; 0 means the thesis' number for the skill
-      (3 Open, 2 Close, 2 Draw).
+    count: demonstrations to record; 0 means the skill file's ``demonstrations``
+      (the thesis's: 3 Open, 2 Close, 2 Draw).
     seed: the first seed tried. Demonstration i uses the i-th seed (from
       ``seed`` upward) whose variation succeeds; the seed also draws the
       object's pose on the table.
@@ -82,7 +80,7 @@ class DemonstratorConfig:
       target before settling back [m]; scaled by a uniform factor in [0.5, 1].
     follow_through_range: how far the motion carries the object, a fraction
       drawn uniform in [min, max] per demonstration
-      (``drake_skill.station.scripted.FOLLOW_THROUGH``: 0 the least that
+      (a skill file's keyframes and their ``least`` poses: 0 the least that
       still succeeds, 1 the scripted motion), as a person stops pushing once
       the object looks done.
     max_force_fraction: a demonstration whose peak robot-scene contact force
@@ -153,8 +151,8 @@ class DemonstratorConfig:
                 "record_hz an integer multiple of action_hz")
         return self
 
-    def count_for(self, skill: str) -> int:
-        return self.count if self.count > 0 else DEFAULT_COUNTS[skill]
+    def count_for(self, spec: SkillSpec) -> int:
+        return self.count if self.count > 0 else int(spec.demonstrations)
 
 
 def load_demonstrator_config(path=None, *, data: str | None = None) -> DemonstratorConfig:
@@ -170,17 +168,19 @@ def load_demonstrator_config(path=None, *, data: str | None = None) -> Demonstra
 
 
 # --------------------------------------------------------------------------- variation
-def humanlike_plan(skill: str, X_WO: RigidTransform, X_WE_home: RigidTransform, seed: int,
+def humanlike_plan(skill, X_WO: RigidTransform, X_WE_home: RigidTransform, seed: int,
                    config: DemonstratorConfig) -> tuple[PosePlan, dict]:
-    """The scripted keyframes of ``skill`` with the seeded variation of ``config``.
+    """The keyframes of ``skill`` (a name, a skill file or a SkillSpec) with the seeded variation of ``config``.
 
     Returns the plan (world frame, starts at home at t = 0) and a JSON-able
     description of the variation drawn (for the file's metadata).
     """
-    from drake_skill.station.scripted import keyframes
-
+    spec = load_skill(skill)
     rng = np.random.default_rng([int(seed), 0x5EED])
-    frames = keyframes(skill)
+    frames = keyframes(spec)
+    if not frames:
+        raise ValueError(f"skill {spec.name!r} has no keyframes to script; record its demonstrations by "
+                         "teleoperation (drake-skill demos record --interactive) or on the robot")
     offset = rng.normal(0.0, config.grasp_offset, size=3)
     # Per keyframe: duration scale, position noise, orientation noise.
     n = len(frames)
@@ -192,7 +192,7 @@ def humanlike_plan(skill: str, X_WO: RigidTransform, X_WE_home: RigidTransform, 
     pause = float(rng.uniform(*config.pause_range))
     overshoot = config.overshoot * float(rng.uniform(0.5, 1.0))
     follow_through = float(rng.uniform(*config.follow_through_range))   # drawn last: the others keep their values
-    frames = keyframes(skill, follow_through)
+    frames = keyframes(spec, follow_through)
 
     times, poses, grip = [0.0], [X_WE_home], [float(frames[0][3])]
     t, t_key_prev = 0.0, 0.0
@@ -265,19 +265,18 @@ def demonstration_from(recorder: StationRecorder, skill: str, seed: int, X_WO_tr
 class ScriptedDemonstrator:
     """Records scripted, human-like demonstrations of one skill in one built station.
 
-    skill: "open", "close" or "draw"; config: the variation and recording
+    skill: a shipped skill's name, a skill file or a SkillSpec; config: the variation and recording
     settings; station_config: the scenario (default ``scenario_for_skill``;
     its camera is switched off when ``config.record_perception`` is false).
     """
 
-    def __init__(self, skill: str, config: DemonstratorConfig | None = None,
+    def __init__(self, skill, config: DemonstratorConfig | None = None,
                  station_config: StationConfig | None = None, meshcat=None):
 
-        if skill not in SKILLS:
-            raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
-        self.skill = skill
+        self.spec = load_skill(skill)
+        self.skill = self.spec.name
         self.config = (config or DemonstratorConfig()).validate()
-        station_config = station_config or scenario_for_skill(skill)
+        station_config = station_config or self.spec.station_config()
         if not self.config.record_perception:
             station_config.enable_camera = False
         elif not station_config.enable_camera:
@@ -292,7 +291,7 @@ class ScriptedDemonstrator:
         """
         sim, config = self.sim, self.config
         X_WO = sim.reset(seed)
-        plan, variation = humanlike_plan(self.skill, X_WO, sim.home_pose(), seed, config)
+        plan, variation = humanlike_plan(self.spec, X_WO, sim.home_pose(), seed, config)
         sim.set_plan(plan)
         recorder = sim.recorder(config.record_hz, config.action_hz)
         recorder.anchor()
@@ -300,7 +299,7 @@ class ScriptedDemonstrator:
         n = int(math.ceil(duration * config.action_hz - 1e-9)) * recorder.k + 1
         for _ in range(n):
             recorder.sample(plan.opening(recorder.next_time()))
-        success = judge_run(self.skill, recorder.times, recorder.obj, recorder.force, sim.config.success)
+        success = judge_run(recorder.times, recorder.obj, recorder.force, sim.config.success)
         metadata = {"source": "scripted", "variation": variation,
                     "demonstrator_config": dc.asdict(config),
                     "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
@@ -318,7 +317,7 @@ class ScriptedDemonstrator:
         """
         from tqdm import tqdm
 
-        count = self.config.count_for(self.skill) if count is None else int(count)
+        count = self.config.count_for(self.spec) if count is None else int(count)
         force_limit = self.config.max_force_fraction * self.sim.config.reflex.contact_force_max
         demos, seed = [], int(self.config.seed)
         bar = tqdm(total=count, desc=f"{self.skill} demonstrations", unit="demo", disable=not progress)

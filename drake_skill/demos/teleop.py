@@ -285,15 +285,14 @@ class TeleopSession:
     is drawn there and the controls are added to its page.
     """
 
-    def __init__(self, skill: str, meshcat, config: TeleopConfig | None = None, station_config=None):
+    def __init__(self, skill, meshcat, config: TeleopConfig | None = None, station_config=None):
         from drake_skill.station.builder import build_station
-        from drake_skill.station.config import SKILLS, scenario_for_skill
+        from drake_skill.skills import load_skill
 
-        if skill not in SKILLS:
-            raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
-        self.skill = skill
+        spec = load_skill(skill)
+        self.skill = spec.name
         self.config = config or TeleopConfig()
-        station_config = station_config or scenario_for_skill(skill)
+        station_config = station_config or spec.station_config()
         if not self.config.record_perception:
             station_config.enable_camera = False
         self.meshcat = meshcat
@@ -371,7 +370,7 @@ class TeleopSession:
             done = self.mode() == DONE or recorder.next_time() - t_start > config.max_duration
             if done and recorder.at_frame and recorder.n_samples >= min_raw:
                 break
-        success = judge_run(self.skill, recorder.times, recorder.obj, recorder.force, self.station.config.success)
+        success = judge_run(recorder.times, recorder.obj, recorder.force, self.station.config.success)
         metadata = {"source": "interactive", "teleop_config": dc.asdict(config),
                     "recording_started_at_s": t_start,
                     "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
@@ -381,7 +380,7 @@ class TeleopSession:
         return demo
 
 
-def record_interactive(skill: str, count: int, seed: int = 0, config: TeleopConfig | None = None,
+def record_interactive(skill, count: int, seed: int = 0, config: TeleopConfig | None = None,
                        meshcat=None, status=print, station_config=None) -> list:
     """Records ``count`` successful interactive demonstrations (a failed one is repeated
     on the next seed). Starts Meshcat if none is given and prints its URL."""

@@ -38,7 +38,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from drake_skill.common import SKILLS
 from drake_skill.fileio import atomic_write_json
 from drake_skill.learning.loop import HELD_OUT_SEED0, REWARDS, LearnConfig
 from drake_skill.learning.policy_search import METHODS
@@ -67,7 +66,7 @@ def _choices(flag: str, given, allowed, what: str) -> tuple[str, ...]:
 class GridConfig:
     """The grid and the settings of every run in it.
 
-    skills, methods, rewards: the cells (``common.SKILLS``,
+    skills, methods, rewards: the cells (shipped skills' names,
       ``policy_search.METHODS``, ``loop.REWARDS``).
     runs: independent runs per cell, seeds ``seed0 .. seed0 + runs - 1``.
     episodes, rollouts: the budget E x C (PoWER: E x C episodes of 1 rollout).
@@ -91,7 +90,9 @@ class GridConfig:
 
     def validate(self) -> "GridConfig":
         """Raises a one-line ValueError naming the flag and the fix; returns self."""
-        self.skills = _choices("--skills", self.skills, SKILLS, "skill")
+        from drake_skill.skills import shipped_skill_names
+
+        self.skills = _choices("--skills", self.skills, shipped_skill_names(), "shipped skill")
         self.methods = _choices("--methods", self.methods, METHODS, "method")
         self.rewards = _choices("--rewards", self.rewards, REWARDS, "reward")
         for flag, value, least in (("--runs", self.runs, 1), ("--episodes", self.episodes, 1),

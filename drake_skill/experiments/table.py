@@ -12,7 +12,7 @@ Columns (:data:`COLUMNS`):
     held_out_before                the skill's held-out success before learning (the same
                                    for every run of the skill; empty when not measured)
 
-Rows are sorted by skill, method, reward (in the orders of ``SKILLS``,
+Rows are sorted by skill (by name), method and reward (in the orders of
 ``METHODS``, ``REWARDS``), run and episode, and written from the stored run
 folders alone, so the same runs give the same bytes.
 """
@@ -24,7 +24,6 @@ import io
 import json
 from pathlib import Path
 
-from drake_skill.common import SKILLS
 from drake_skill.fileio import atomic_write_text
 from drake_skill.learning.loop import REWARDS
 from drake_skill.learning.policy_search import METHODS
@@ -43,8 +42,8 @@ def _order(values, value) -> int:
 
 
 def cell_key(skill: str, method: str, reward: str) -> tuple:
-    """Sort key of a cell: the orders of SKILLS, METHODS, REWARDS (unknown names last, by name)."""
-    return (_order(SKILLS, skill), skill, _order(METHODS, method), method, _order(REWARDS, reward), reward)
+    """Sort key of a cell: skills by name, then the orders of METHODS and REWARDS (unknown names last)."""
+    return (skill, _order(METHODS, method), method, _order(REWARDS, reward), reward)
 
 
 def stored_runs(out) -> list[dict]:

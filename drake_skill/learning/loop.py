@@ -70,23 +70,11 @@ ARTIFACTS = ("config.json", "results.jsonl", "summary.json", "learning_curve.png
 
 REWARDS = ("dense", "sparse")
 
-#: sigma_0 (thesis Eq. 5.3) per skill: the default of ``LearnConfig.exploration_scale``
-#: and ``explore_skill``. Open explores at a tenth of Sigma_0, Close at the
-#: thesis' 1 (docs/method.md section 5, "Initial exploration scale").
-EXPLORATION_SCALES = {"open": 0.1, "close": 1.0, "draw": 0.1}
-
-
-def default_exploration_scale(skill: str) -> float:
-    """sigma_0 of thesis Eq. 5.3 for ``skill`` (``EXPLORATION_SCALES``)."""
-    if skill not in EXPLORATION_SCALES:
-        raise ValueError(f"skill {skill!r}: no default exploration scale; expected one of "
-                         f"{', '.join(EXPLORATION_SCALES)} or give exploration_scale")
-    return EXPLORATION_SCALES[skill]
-
-
 def exploration_scales_text() -> str:
-    """``EXPLORATION_SCALES`` for help texts: "open 0.1, close 1, draw 0.1"."""
-    return ", ".join(f"{skill} {scale:g}" for skill, scale in EXPLORATION_SCALES.items())
+    """The shipped skills' exploration scales (their skill files) for help texts: "close 1, draw 0.1, open 0.1"."""
+    from drake_skill.skills import shipped_skills
+
+    return ", ".join(f"{spec.name} {spec.exploration_scale:g}" for spec in shipped_skills())
 
 
 def _valid_exploration_scale(value) -> bool:
@@ -140,7 +128,7 @@ class LearnConfig:
     exploration_scale: sigma_0 of thesis Eq. 5.3: the first episode samples
       ``w_b ~ N(w_b, exploration_scale * Sigma_b^0)`` (every method starts
       from that covariance; the covariance floor follows it). None: the
-      skill's (``EXPLORATION_SCALES``; ``learn`` saves the value it used).
+      skill file's ``exploration_scale`` (``learn`` saves the value it used).
       The thesis sets it to 1 (docs/method.md section 5).
     """
 
@@ -442,7 +430,7 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
           progress: bool = True, stop_after: int | None = None, log=None, runner=None) -> LearnOutcome:
     """Runs (or resumes) a learning run of the skill in ``skill_dir``; see the module docstring.
 
-    station_config: the scenario (default ``scenario_for_skill``); rollout_config:
+    station_config: the scenario (default the skill's, ``Skill.station_config``); rollout_config:
     :class:`~drake_skill.learning.rollout.RolloutConfig`; workers / ray_address /
     use_ray: where rollouts run (:func:`~drake_skill.learning.workers.make_pool`;
     they do not change the numbers); meshcat: watch live (greedy executions
@@ -457,15 +445,14 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec, make_pool
     from drake_skill.skill import Skill
-    from drake_skill.station.config import scenario_for_skill
 
     config = (config or LearnConfig()).validate()
     out_dir = Path(out_dir)
     skill_dir = Path(skill_dir)
     skill = Skill.load(skill_dir)
     if config.exploration_scale is None:
-        config = dc.replace(config, exploration_scale=default_exploration_scale(skill.name))
-    station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
+        config = dc.replace(config, exploration_scale=float(skill.spec.exploration_scale))
+    station_config = station_config if station_config is not None else skill.station_config()
     rollout_config = (rollout_config or RolloutConfig()).validate()
     run_config = {"learn": dc.asdict(config), "skill": skill.name, "skill_dir": str(skill_dir.resolve()),
                   "station": yaml_dump_typed(station_config), "rollout": dc.asdict(rollout_config)}
@@ -683,12 +670,11 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec, make_pool
     from drake_skill.skill import Skill
-    from drake_skill.station.config import scenario_for_skill
 
     if int(poses) < 1:
         raise ValueError(f"poses: expected at least 1 held-out pose, got {poses}")
     skill = Skill.load(skill_dir)
-    station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
+    station_config = station_config if station_config is not None else skill.station_config()
     rollout_config = (rollout_config or RolloutConfig()).validate()
     seeds = [int(seed0) + i for i in range(int(poses))]
     indices = range(len(skill.dmps)) if all_demos else [skill.initial_index]
@@ -734,15 +720,14 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec, make_pool
     from drake_skill.skill import Skill
-    from drake_skill.station.config import scenario_for_skill
 
     if int(rollouts) < 1:
         raise ValueError(f"rollouts: expected at least 1 exploratory rollout, got {rollouts}")
     skill = Skill.load(skill_dir)
-    station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
+    station_config = station_config if station_config is not None else skill.station_config()
     rollout_config = (rollout_config or RolloutConfig()).validate()
     if exploration_scale is None:
-        exploration_scale = default_exploration_scale(skill.name)
+        exploration_scale = float(skill.spec.exploration_scale)
     if not _valid_exploration_scale(exploration_scale):
         raise ValueError(f"exploration_scale: expected a factor in (0, 100] on Sigma_b^0, got {exploration_scale!r}")
     samples = make_policy_search("pi2-es-cov", skill.initial_weights, exploration_scale * skill.sigma0,

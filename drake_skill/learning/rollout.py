@@ -59,7 +59,7 @@ from drake_skill.common import IkWarningCounter
 from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
 from drake_skill.station.builder import Station, build_station
-from drake_skill.station.config import StationConfig, scenario_for_skill
+from drake_skill.station.config import StationConfig
 from drake_skill.station.records import StationLoggers
 from drake_skill.station.simulation import advance_station, check_joint_state, pose_to_vector
 from drake_skill.station.success import judge_run
@@ -276,7 +276,7 @@ class RolloutRunner:
         skill: a fitted :class:`~drake_skill.skill.Skill` (action and goal
             model), or an :class:`ActionModel` (no learned reward; then
             ``config.goal_model`` must be off).
-        station_config: the scenario (default: ``scenario_for_skill(skill.name)``).
+        station_config: the scenario (default: the skill's, ``Skill.station_config()``).
         config: :class:`RolloutConfig`.
         meshcat: a ``pydrake.geometry.Meshcat`` to draw the station in (or None).
         station: a built station with the simulated station's ports to use
@@ -300,7 +300,7 @@ class RolloutRunner:
         self.rollout_config = (config or RolloutConfig()).validate()
         if station is not None:
             station_config = station.config
-        station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
+        station_config = station_config if station_config is not None else skill.station_config()
         dmp_config = skill.dmp_config if isinstance(skill, ActionModel) else skill.config.dmp
         if self.rollout_config.goal_model and isinstance(skill, ActionModel):
             raise ValueError("RolloutConfig.goal_model = true needs a fitted Skill (with a goal model), "
@@ -337,7 +337,7 @@ class RolloutRunner:
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         self.simulator = Simulator(self.diagram, self.context)
-        if getattr(self.station, "realtime", False):
+        if self.station.realtime:
             self.simulator.set_target_realtime_rate(1.0)
 
     @property
@@ -456,7 +456,7 @@ class RolloutRunner:
             check_joint_state(state, t)
         times, poses, objs = records.times, records.ee_pose, records.object_state
         final = float(objs[-1])
-        success = judge_run(self.skill_name, times, objs, records.contact_force, self.config.success)
+        success = judge_run(times, objs, records.contact_force, self.config.success)
         result.success, result.final_object_state = bool(success), final
         result.times, result.ee_pose, result.object_state = times, poses, objs
         if self.pipeline is not None:

@@ -416,7 +416,7 @@ def add_object_segmenter(builder, station, config: ObjectSegmenterConfig | None 
     for the table plane; else the full-frame ``point_cloud``. ``config`` defaults to
     :func:`segmenter_config_for_station` of ``station.config`` for that cloud.
     """
-    camera = getattr(station, "object_camera", None)
+    camera = station.object_camera
     if config is None:
         config = segmenter_config_for_station(station.config, camera.window if camera is not None else None)
     segmenter = builder.AddNamedSystem(name, ObjectSegmenter(config))

@@ -231,11 +231,16 @@ class Station(Diagram):
     ``plant``, ``scene_graph``, ``config``, ``object_base`` (the locked free
     body), ``object_joint`` (lid hinge or drawer slide), ``ee_controller``,
     ``gripper`` (the finger rate limiter) and ``robot_bodies`` (indices).
+    It satisfies :class:`drake_skill.station.interface.StationInterface`.
     """
+
+    #: A simulation runs as fast as it can (the hardware station's is True).
+    realtime = False
 
     def __init__(self, config: StationConfig, meshcat=None):
         super().__init__()
         self.config = validate_station_config(config)
+        self.object_camera = None      # the cropped object camera, with the camera on
         builder = DiagramBuilder()
         scene = add_scene_plant(builder, config)
         plant, scene_graph = scene.plant, scene.scene_graph

@@ -333,8 +333,7 @@ def add_object_camera(builder, station, color_camera: ColorRenderCamera, depth_c
     ``station`` is the Station being built (its plant finalised): the window comes
     from its object and ``station.config.object``; the camera must be fixed in the
     world (``parent_id`` the world frame), as the window is computed once. It
-    renders ``station.render_scene`` (:func:`add_render_scene`) when the station
-    has one, else the plant's SceneGraph.
+    renders ``station.render_scene`` (:func:`add_render_scene`).
     """
     full = color_camera.core().intrinsics()
     world_id = station.plant.GetBodyFrameIdOrThrow(station.plant.world_body().index())
@@ -352,7 +351,7 @@ def add_object_camera(builder, station, color_camera: ColorRenderCamera, depth_c
                               depth_camera.depth_range())
     # Depth and labels: the sensor (its colour port stays unused).
     sensor = builder.AddNamedSystem("object_camera", RgbdSensor(parent_id, X_PC, color, depth))
-    scene = getattr(station, "render_scene", None) or station.scene_graph
+    scene = station.render_scene
     builder.Connect(scene.get_query_output_port(), sensor.query_object_input_port())
     # Colour: rendered beyond the window and cut back to it (module docstring).
     color_image = builder.AddNamedSystem("object_color_camera",

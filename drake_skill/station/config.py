@@ -6,10 +6,10 @@ field types at run time.)
 A scenario names the plant (Drake's ``MultibodyPlantConfig``), the object on
 the table and its joint physics, the contact parameters of every surface, the
 camera (Drake's ``CameraConfig``), the controller, the collision reflex and
-the success judges; code never hard-codes them. The Open, Close and Draw
-scenarios ship as YAML files in ``drake_skill/station/scenarios/``
-(:func:`scenario_for_skill`); a user's own file loads with
-:func:`load_station_config`. Units are SI (m, rad, s, kg, N).
+the success rule; code never hard-codes them. The scenes of the shipped
+skills are YAML files in ``drake_skill/station/scenarios/``, and a skill file
+names its scene (:func:`scenario_for_skill` gives a skill's scene with the
+skill's success rule); a user's own file loads with :func:`load_station_config`. Units are SI (m, rad, s, kg, N).
 ``load_station_config`` turns every problem into a ``ValueError`` that names
 the offending field.
 """
@@ -17,6 +17,7 @@ the offending field.
 
 import dataclasses as dc
 import math
+import typing
 from pathlib import Path
 
 import numpy as np
@@ -27,10 +28,12 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.sensors import CameraConfig
 
-from drake_skill.common import SKILLS, look_at
+from drake_skill.common import look_at
 from drake_skill.station import limits
 
 OBJECT_KINDS = ("box", "drawer")
+#: The one joint of each object kind (``models/``), the one ``object_state`` reports.
+OBJECT_JOINTS = {"box": "lid_hinge", "drawer": "drawer_slide"}
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 #: The camera's pose: 1.3 m in front and 0.7 m to the right of the robot's base, 0.8 m up.
 CAMERA_POSITION = (1.30, -0.70, 0.80)
@@ -190,20 +193,21 @@ class ReflexConfig:
 
 @dc.dataclass
 class SuccessConfig:
-    """Ground-truth success judges (simulation only, never a reward).
+    """The ground-truth success rule on the object's joint (simulation only, never a reward).
 
-    All are read at the end of a settle phase of ``settle_time`` s in which the
+    A skill file's ``success`` (docs/skills.md); the station takes it from the
+    skill. Read at the end of a settle phase of ``settle_time`` s in which the
     hand holds still away from the object (no robot-object contact in it).
-    open_min: lid angle at the end at least this [rad]: past the tipping
-      angle, so that the lid stays open by its weight for the settle time.
-    close_max: lid angle at the end at most this [rad] (shut).
-    draw_min: drawer travel at the end at least this [m].
+    joint: the object's joint the rule reads (the station's ``object_state``);
+      "" only in a scenario read without a skill, whose runs have no verdict.
+    above: the joint's final position must be at least this [rad or m], or
+    below: at most this (exactly one of the two).
     settle_time: length of the settle phase [s].
     """
 
-    open_min: float = 1.7
-    close_max: float = 0.05
-    draw_min: float = 0.10
+    joint: str = ""
+    above: typing.Optional[float] = None
+    below: typing.Optional[float] = None
     settle_time: float = 1.0
 
 
@@ -358,11 +362,10 @@ def validate_station_config(config: StationConfig) -> StationConfig:
     _vector("reflex.external_torque_max", ref.external_torque_max, 7, 0.0, 1e3, lo_open=True,
             what="positive torques [N m]")
 
-    suc = config.success
-    _number("success.open_min", suc.open_min, 0.0, 1.9, lo_open=True, what="a lid angle [rad]")
-    _number("success.close_max", suc.close_max, 0.0, 1.9, lo_open=True, what="a lid angle [rad]")
-    _number("success.draw_min", suc.draw_min, 0.0, 0.22, lo_open=True, what="a drawer travel [m]")
-    _number("success.settle_time", suc.settle_time, 0.0, 60.0, what="a duration [s]")
+    if config.success.joint:
+        validate_success(config.success, "success")
+        if config.success.joint != object_joint_name(config):
+            _bad("success.joint", config.success.joint, f"the object's joint, '{object_joint_name(config)}'")
     return config
 
 
@@ -397,13 +400,28 @@ def dump_station_config(config: StationConfig) -> str:
     return yaml_dump_typed(config)
 
 
-def scenario_path(skill: str) -> Path:
-    if skill not in SKILLS:
-        raise ValueError(f"skill {skill!r}: expected one of {', '.join(SKILLS)}")
-    return SCENARIO_DIR / f"{skill}.yaml"
+def object_joint_name(config: StationConfig) -> str:
+    """The name of the scenario's object joint (the one ``object_state`` reports)."""
+    return OBJECT_JOINTS[config.object.kind]
 
 
-def scenario_for_skill(skill: str) -> StationConfig:
-    """The shipped scenario of a skill (``scenarios/<skill>.yaml``): the box closed
-    (open), the lid resting open on its stay (close), or the drawer (draw)."""
-    return load_station_config(scenario_path(skill))
+def validate_success(rule: SuccessConfig, field: str = "success") -> SuccessConfig:
+    """Raises ValueError naming the field of a success rule that cannot work; returns it."""
+    if not rule.joint:
+        _bad(f"{field}.joint", rule.joint, "the name of the object's joint the rule reads")
+    if (rule.above is None) == (rule.below is None):
+        _bad(f"{field}.above/below", (rule.above, rule.below),
+             "exactly one of 'above' (success at or above it) and 'below' (at or below it)")
+    value = rule.above if rule.above is not None else rule.below
+    _number(f"{field}.{'above' if rule.above is not None else 'below'}", value,
+            what="a finite joint position [rad or m]")
+    _number(f"{field}.settle_time", rule.settle_time, 0.0, 60.0, what="a duration [s]")
+    return rule
+
+
+def scenario_for_skill(skill) -> StationConfig:
+    """The scenario of a skill (a shipped skill's name, a skill file's path or a
+    :class:`~drake_skill.skills.SkillSpec`) with the skill's success rule."""
+    from drake_skill.skills import load_skill
+
+    return load_skill(skill).station_config()

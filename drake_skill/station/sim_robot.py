@@ -199,7 +199,7 @@ class SimRobot:
             an LcmSubscriberSystem (its serializer is called with the GIL)
             is safe.
         expire_sec: the driver's ``--expire_sec``.
-        guide: a skill name: instead of following commands, the arm is moved
+        guide: a skill (name, skill file or SkillSpec): instead of following commands, the arm is moved
             through that skill's scripted, human-like demonstration
             (``drake_skill.demos.demonstrator.humanlike_plan`` for the run's
             seed) by an end-effector controller of its own: a person guiding
@@ -207,7 +207,7 @@ class SimRobot:
     """
 
     def __init__(self, config: HardwareConfig | None = None, lcm: DrakeLcm | None = None,
-                 pump: bool = True, meshcat=None, expire_sec: float = 0.1, guide: str | None = None):
+                 pump: bool = True, meshcat=None, expire_sec: float = 0.1, guide=None):
         self.config = validate_hardware_config(config if config is not None else HardwareConfig())
         self.lcm = lcm if lcm is not None else DrakeLcm(self.config.lcm_url)
         # The reflex is the driver side's: the hardware station's monitor decides it from the
@@ -392,9 +392,9 @@ class SimRobot:
         """Lid angle [rad] or drawer travel [m] now (read when stopped; renders nothing)."""
         return float(self.station.GetOutputPort("object_state").Eval(self.station_context())[0])
 
-    def judge(self, skill: str) -> bool:
-        """Ground-truth success of ``skill`` for the object state now."""
-        return judge_success(skill, self.object_state(), self.station.config.success)
+    def judge(self) -> bool:
+        """Ground-truth success (the scenario's rule, its skill's) for the object state now."""
+        return judge_success(self.object_state(), self.station.config.success)
 
     def command_counts(self) -> tuple[int, int]:
         """(accepted, dropped-as-expired) commands since the last reset."""

@@ -383,12 +383,13 @@ class StationSimulation:
         recorder.record(int(round(duration * record_hz)))
         return recorder.run_log(self._X_WO)
 
-    def judge(self, skill: str, object_state: float | None = None) -> bool:
-        """Ground-truth verdict on the final object state alone (see also :meth:`judge_log`)."""
+    def judge(self, object_state: float | None = None) -> bool:
+        """Ground-truth verdict of the scenario's success rule (its skill's) on the
+        final object state alone (see also :meth:`judge_log`)."""
         value = self.object_state() if object_state is None else object_state
-        return judge_success(skill, value, self.config.success)
+        return judge_success(value, self.config.success)
 
-    def judge_log(self, skill: str, log: RunLog) -> bool:
+    def judge_log(self, log: RunLog) -> bool:
         """Ground-truth verdict of a run: the final object state, judged only if the
         hand touched nothing in the run's last ``success.settle_time`` s."""
-        return judge_run(skill, log.times, log.object_state, log.contact_force, self.config.success)
+        return judge_run(log.times, log.object_state, log.contact_force, self.config.success)
