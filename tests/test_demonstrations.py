@@ -112,7 +112,7 @@ def _write_arrays(path, arrays):
     (lambda a: a.update(times=a["times"][:9], X_OE=a["X_OE"][:9], object_points=a["object_points"][:9],
                         perception_valid=a["perception_valid"][:9]), "times", "9 samples; expected at least 10"),
     (lambda a: a.update(object_points=a["object_points"].astype(np.float64)), "object_points", "float32"),
-    (lambda a: a.update(skill=np.array("juggle")), "skill", "'juggle'; expected one of open, close, draw"),
+    (lambda a: a.update(skill=np.array("juggle it")), "skill", "'juggle it'; expected a skill's name"),
     (lambda a: a.pop("X_WO_true"), "X_WO_true", "is missing"),
     (lambda a: a.pop("perception_valid"), "perception_valid", "is missing"),
     # issue 12, group 3: the cloud size, degenerate clouds marked valid, X_OE vs X_OE_100hz

@@ -69,7 +69,8 @@ def test_follow_through_moves_along_the_screw_from_least_to_pose():
 
 def test_a_users_skill_file_loads_with_its_scenario_relative_to_it(tmp_path):
     (tmp_path / "scenes").mkdir()
-    (tmp_path / "scenes" / "my_drawer.yaml").write_text("object: {kind: drawer, x: 0.62}\n")
+    scene = (load_skill("draw").scenario_path().read_text()).replace("x: 0.68", "x: 0.62")
+    (tmp_path / "scenes" / "my_drawer.yaml").write_text(scene)
     spec = load_skill(_write(tmp_path, scenario="scenes/my_drawer.yaml"))
     config = spec.station_config()
     assert spec.name == "push" and config.object.x == 0.62

@@ -144,7 +144,7 @@ def test_object_state_port_reports_lid_angle():
 
 
 @pytest.mark.parametrize("yaml_text,field", [
-    ("object: {kind: teapot}", "object.kind"),
+    ("object: {kind: box}", "kind"),
     ("camera: {width: 0, height: 480}", "camera.width"),
     ("camera: {width: 100000}", "camera.width"),
     ("time_stepp: 0.001", "time_stepp"),
@@ -166,7 +166,15 @@ def test_object_state_port_reports_lid_angle():
     ("controller: {velocity_scale: .nan}", "controller.velocity_scale"),
     ("controller: {finger_kp: 0.0}", "controller.finger_kp"),
     ("reflex: {contact_force_max: -5}", "reflex.contact_force_max"),
-    ("contact: {lid: {friction: .nan}}", "contact.lid.friction"),
+    ("contact: {object: {friction: .nan}}", "contact.object.friction"),
+    ("contact: {lid: {friction: 0.5}}", "lid"),
+    ("object: {joint: hinge}", "object.joint"),
+    ("object: {base_body: lid}", "object.base_body"),
+    ("object: {model: cupboard}", "object.model"),
+    ("object: {colour: {saturation_min: 1.0}}", "object.colour.saturation_min"),
+    ("object: {colour: {hue_min_deg: 220, hue_max_deg: 220}}", "object.colour.hue_min_deg/hue_max_deg"),
+    ("directives: [{add_model: {name: box, file: package://drake_skill_models/box.sdf}}]", "directives"),
+    ("directives: [{add_model: {name: box, file: nowhere/box.sdf}}]", "directives[0].add_model.file"),
     ("camera: {focal: !FovDegrees {x: 200.0, y: 43.0}}", "camera.focal.x"),
     ("camera: {fps: 0.0}", "camera.fps"),
     ("success: {open_min: 1.7}", "open_min"),
@@ -182,9 +190,9 @@ def test_bad_config_names_the_field(yaml_text, field):
 
 def test_config_yaml_round_trip(tmp_path):
     path = tmp_path / "scenario.yaml"
-    path.write_text("plant:\n  time_step: 0.001\nobject:\n  kind: drawer\n  x: 0.68\ncamera:\n  fps: 5.0\n")
+    path.write_text("plant:\n  time_step: 0.001\nobject:\n  x: 0.68\ncamera:\n  fps: 5.0\n")
     config = load_station_config(path)
-    assert config.object.kind == "drawer" and config.time_step == 0.001 and config.camera.fps == 5.0
+    assert config.object.joint == "lid_hinge" and config.object.x == 0.68 and config.time_step == 0.001 and config.camera.fps == 5.0
     assert config.camera.width == StationConfig().camera.width
     # Keys left out keep their defaults, including the plant's contact settings.
     assert config.plant.discrete_contact_approximation == "sap"
@@ -195,13 +203,13 @@ def test_config_yaml_round_trip(tmp_path):
 def test_shipped_scenarios_are_yaml_files_in_the_package():
     from drake_skill.skills import load_skill
     from drake_skill.station.config import dump_station_config
-    for skill, kind, x, joint in (("open", "box", 0.60, 0.0), ("close", "box", 0.46, 1.9),
-                                  ("draw", "drawer", 0.68, 0.0)):
+    for skill, model, x, joint in (("open", "box", 0.60, 0.0), ("close", "box", 0.46, 1.9),
+                                   ("draw", "drawer", 0.68, 0.0)):
         path = load_skill(skill).scenario_path()
         assert path.parent.name == "scenarios" and path.suffix == ".yaml" and path.is_file()
         config = scenario_for_skill(skill)
         assert config.success == load_skill(skill).success    # the skill's rule, not the scene's
-        assert (config.object.kind, config.object.x, config.object.initial_joint) == (kind, x, joint)
+        assert (config.object.model, config.object.x, config.object.initial_joint) == (model, x, joint)
         assert config.object.gravity
         # The dump of a loaded scenario loads back to the same values.
         again = load_station_config(data=dump_station_config(config))

@@ -218,6 +218,9 @@ def segmenter_config_for_station(station_config, window=None) -> ObjectSegmenter
                                    plane_image_width=cam.width, plane_image_height=cam.height,
                                    default_pose=[obj.x, obj.y, obj.yaw])
     config.segmentation.nominal_yaw = obj.yaw
+    colour = obj.colour
+    config.segmentation.hue_min_deg, config.segmentation.hue_max_deg = colour.hue_min_deg, colour.hue_max_deg
+    config.segmentation.saturation_min, config.segmentation.value_min = colour.saturation_min, colour.value_min
     if obj.footprint_heights:
         config.segmentation.footprint_min_height, config.segmentation.footprint_max_height = obj.footprint_heights
     return config.validate()

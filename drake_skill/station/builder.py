@@ -57,7 +57,7 @@ from pydrake.geometry import (
     RoleAssign,
 )
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.parsing import Parser
+from pydrake.multibody.parsing import ModelDirectives, Parser, ProcessModelDirectives
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, PdControllerGains
 from pydrake.perception import BaseField, DepthImageToPointCloud
@@ -72,18 +72,13 @@ from drake_skill.station.models import add_package_paths, model_url
 from drake_skill.station.config import StationConfig, validate_station_config
 from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor
 
-# Per object kind: SDF file, base body, articulated joint.
-_OBJECTS = {
-    "box": ("box.sdf", "box_base", "lid_hinge"),
-    "drawer": ("drawer.sdf", "cabinet", "drawer_slide"),
-}
-# Which ContactConfig surface each collision geometry gets: (body name, geometry
-# name fragment, "" for any of the body's geometries, surface); panda_link* -> arm.
+# The robot's and the table's collision geometries get these ContactConfig
+# surfaces (body name, geometry name fragment, "" for any of the body's
+# geometries, surface); panda_link* -> arm; every geometry of the object's
+# model -> object.
 _SURFACES = (
     ("panda_leftfinger", "", "finger_pads"), ("panda_rightfinger", "", "finger_pads"),
     ("panda_hand", "", "hand_housing"), ("table_top", "", "table"),
-    ("box_base", "", "box"), ("box_lid", "", "lid"), ("cabinet", "", "cabinet"),
-    ("drawer", "handle", "handle"), ("drawer", "standoff", "handle"), ("drawer", "", "drawer"),
 )
 
 
@@ -153,21 +148,14 @@ def add_scene_plant(builder: DiagramBuilder, config: StationConfig) -> ScenePlan
     plant, scene_graph = AddMultibodyPlant(config.plant, builder)
     parser = Parser(plant)
     add_package_paths(parser.package_map())
-    arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
-    hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
-    table = parser.AddModels(url=model_url("table.sdf"))[0]
-    sdf, base_name, joint_name = _OBJECTS[config.object.kind]
-    obj = parser.AddModels(url=model_url(sdf))[0]
-    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
-    plant.WeldFrames(plant.GetFrameByName("panda_link8", arm),
-                     plant.GetFrameByName("panda_hand", hand), X_FLANGE_HAND)
-    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
+    ProcessModelDirectives(ModelDirectives(directives=config.directives), plant, parser)
+    arm, hand = plant.GetModelInstanceByName("panda"), plant.GetModelInstanceByName("panda_hand")
+    obj = plant.GetModelInstanceByName(config.object.model)
+    object_base, object_joint = object_parts(plant, obj, config)
     plant.set_gravity_enabled(obj, bool(config.object.gravity))
-    object_base = plant.GetBodyByName(base_name, obj)
-    object_joint = plant.GetJointByName(joint_name, obj)
     plant.SetDefaultFloatingBaseBodyPose(object_base, nominal_object_pose(config))
     object_joint.set_default_damping(config.object.joint_damping)
-    _set_contact_properties(plant, scene_graph, config.contact)
+    _set_contact_properties(plant, scene_graph, config.contact, obj)
 
     ctrl = config.controller
     for i in range(7):
@@ -178,17 +166,14 @@ def add_scene_plant(builder: DiagramBuilder, config: StationConfig) -> ScenePlan
         actuator.set_controller_gains(PdControllerGains(p=ctrl.finger_kp, d=ctrl.finger_kd))
     # Coulomb friction of the object's joint: zero stiffness, damping
     # joint_friction_gain, force clamped to joint_friction (SAP's PD clamp).
-    friction = plant.AddJointActuator(f"{joint_name}_friction", object_joint,
+    friction = plant.AddJointActuator(f"{object_joint.name()}_friction", object_joint,
                                       effort_limit=max(config.object.joint_friction, 1e-9))
     friction.set_controller_gains(PdControllerGains(p=0.0, d=config.object.joint_friction_gain))
     plant.Finalize()
 
     plant.SetDefaultPositions(arm, np.asarray(config.q_home, dtype=float))
     plant.SetDefaultPositions(hand, [config.gripper_home / 2] * 2)
-    if config.object.kind == "box":
-        object_joint.set_default_angle(config.object.initial_joint)
-    else:
-        object_joint.set_default_translation(config.object.initial_joint)
+    object_joint.set_default_positions([config.object.initial_joint])
 
     # Robot-internal collisions cannot happen with the IK limits in force
     # (and the model has no overlapping robot geometry at q_home, tested);
@@ -202,20 +187,47 @@ def add_scene_plant(builder: DiagramBuilder, config: StationConfig) -> ScenePlan
     return ScenePlant(plant, scene_graph, arm, hand, obj, object_base, object_joint, robot_bodies)
 
 
-def _set_contact_properties(plant, scene_graph, contact) -> None:
+def object_parts(plant, obj, config: StationConfig):
+    """The object model's base body and its one articulated joint (``object.base_body``,
+    ``object.joint``); a name the model lacks, a joint with other than one position,
+    or an initial position outside the joint's limits is a ValueError naming the field."""
+    o = config.object
+    bodies = [plant.get_body(b).name() for b in plant.GetBodyIndices(obj)]
+    if o.base_body not in bodies:
+        raise ValueError(f"station config field 'object.base_body' = {o.base_body!r}: the model "
+                         f"'{o.model}' has no such body; expected one of {', '.join(bodies)}")
+    joints = [plant.get_joint(j).name() for j in plant.GetJointIndices(obj)]
+    if o.joint not in joints:
+        raise ValueError(f"station config field 'object.joint' = {o.joint!r}: the model '{o.model}' has no "
+                         f"such joint; expected one of {', '.join(joints) or '(none)'}")
+    joint = plant.GetJointByName(o.joint, obj)
+    if joint.num_positions() != 1:
+        raise ValueError(f"station config field 'object.joint' = {o.joint!r}: a {joint.type_name()} joint of "
+                         f"{joint.num_positions()} positions; expected a revolute or prismatic joint")
+    lo, hi = float(joint.position_lower_limits()[0]), float(joint.position_upper_limits()[0])
+    if not lo - 1e-9 <= o.initial_joint <= hi + 1e-9:
+        raise ValueError(f"station config field 'object.initial_joint' = {o.initial_joint!r}: expected a "
+                         f"position within the joint's limits [{lo}, {hi}]")
+    return plant.GetBodyByName(o.base_body, obj), joint
+
+
+def _set_contact_properties(plant, scene_graph, contact, obj) -> None:
     """Replaces every collision geometry's proximity properties with its surface's (``contact``)."""
     inspector = scene_graph.model_inspector()
     for body_index in range(plant.num_bodies()):
         body = plant.get_body(BodyIndex(body_index))
         for gid in plant.GetCollisionGeometriesForBody(body):
             name = inspector.GetName(gid)
-            surface = "arm" if body.name().startswith("panda_link") else None
-            for body_name, fragment, candidate in _SURFACES:
+            surface = ("object" if body.model_instance() == obj else
+                       "arm" if body.name().startswith("panda_link") else None)
+            for body_name, fragment, candidate in _SURFACES if surface is None else ():
                 if body.name() == body_name and fragment in name:
                     surface = candidate
                     break
             if surface is None:
-                raise AssertionError(f"no contact surface for geometry {name} of body {body.name()}")
+                raise ValueError(f"station config field 'directives': the collision geometry {name} of body "
+                                 f"{body.name()} is neither the robot's, the table's nor the object's; "
+                                 "add only the robot, the table and the object (object.model)")
             s = getattr(contact, surface)
             props = ProximityProperties()
             AddContactMaterial(point_stiffness=s.stiffness, friction=CoulombFriction(s.friction, s.friction),
@@ -402,12 +414,11 @@ class Station(Diagram):
         return self.plant.EvalBodyPoseInWorld(plant_context, self.object_base)
 
     def set_object_joint(self, context, value: float) -> None:
-        """Sets the lid angle [rad] or drawer travel [m] in ``context``."""
+        """Sets the object's joint (a lid's angle [rad], a drawer's travel [m]) in ``context``."""
         plant_context = self.plant.GetMyMutableContextFromRoot(context)
-        if self.config.object.kind == "box":
-            self.object_joint.set_angle(plant_context, value)
-        else:
-            self.object_joint.set_translation(plant_context, value)
+        positions = self.plant.GetPositions(plant_context).copy()
+        positions[self.object_joint.position_start()] = value
+        self.plant.SetPositions(plant_context, positions)
 
     def reset(self, context, seed: int | None = None) -> RigidTransform:
         """Prepares a context that was just set to its defaults (``SetDefaultContext``)

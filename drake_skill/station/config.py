@@ -25,15 +25,29 @@ from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.geometry import RenderEngineVtkParams
 from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import ModelDirective
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.sensors import CameraConfig
 
 from drake_skill.common import look_at
 from drake_skill.station import limits
 
-OBJECT_KINDS = ("box", "drawer")
-#: The one joint of each object kind (``models/``), the one ``object_state`` reports.
-OBJECT_JOINTS = {"box": "lid_hinge", "drawer": "drawer_slide"}
+#: The model instances every station's directives must add (the object's is named in ``object.model``).
+ROBOT_MODELS = ("panda", "panda_hand", "table")
+#: The robot and the table as Drake model directives (``ProcessModelDirectives``):
+#: the Panda on the world origin, its hand on the flange turned -45 degrees about z,
+#: the table top welded at the world origin. A scenario's ``directives`` add the object.
+ROBOT_DIRECTIVES = """
+- add_model: {name: panda, file: "package://drake_skill_models/panda_arm.sdf"}
+- add_weld: {parent: world, child: panda::panda_link0}
+- add_model: {name: panda_hand, file: "package://drake_skill_models/panda_hand.sdf"}
+- add_weld:
+    parent: panda::panda_link8
+    child: panda_hand::panda_hand
+    X_PC: {rotation: !Rpy {deg: [0.0, 0.0, -45.0]}}
+- add_model: {name: table, file: "package://drake_skill_models/table.sdf"}
+- add_weld: {parent: world, child: table::table_top}
+"""
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 #: The camera's pose: 1.3 m in front and 0.7 m to the right of the robot's base, 0.8 m up.
 CAMERA_POSITION = (1.30, -0.70, 0.80)
@@ -41,23 +55,42 @@ CAMERA_TARGET = (0.52, 0.0, 0.06)
 
 
 @dc.dataclass
-class ObjectConfig:
-    """The articulated object on the table, its joint physics and how its pose is randomised.
+class ColourConfig:
+    """The object's colour as the segmenter finds it (HSV; docs/method.md section 3).
 
-    kind: "box" (hinged lid, skills open/close) or "drawer" (skill draw).
+    hue_min_deg, hue_max_deg: hue range [deg, 0..360); min > max wraps through 0 (reds).
+    saturation_min, value_min: lower bounds in [0, 1].
+    """
+
+    hue_min_deg: float = 200.0
+    hue_max_deg: float = 250.0
+    saturation_min: float = 0.45
+    value_min: float = 0.15
+
+
+@dc.dataclass
+class ObjectConfig:
+    """The articulated object on the table: which model it is, its joint physics,
+    how its pose is randomised and how the camera finds it.
+
+    model: the name of the object's model instance in ``directives``.
+    base_body: its body that rests on the table (a free body, placed and
+      locked at the drawn pose); its frame is the object frame O.
+    joint: its one articulated joint (revolute or prismatic), the one the
+      station's ``object_state`` reports and success rules read.
     x, y, yaw: nominal pose of the object's base frame O on the table [m, rad].
-    initial_joint: lid angle [rad] or drawer travel [m] at the start of a run.
+    initial_joint: the joint's position at the start of a run [rad or m].
     randomize_xy: half-width of the uniform translation noise per axis [m].
     randomize_yaw: half-width of the uniform yaw noise [rad].
     gravity: gravity acts on the object (its base is locked to the table).
-    joint_damping: viscous damping of the lid hinge [N m s/rad] or the drawer
-      slide [N s/m].
-    joint_friction: Coulomb friction of the hinge [N m] or slide [N], modelled
+    joint_damping: viscous damping of the joint [N m s/rad or N s/m].
+    joint_friction: Coulomb friction of the joint [N m or N], modelled
       as SAP's implicit PD constraint with zero stiffness, damping
       ``joint_friction_gain`` and its force clamped to ``joint_friction``: the
       regularised Coulomb law tau = -clamp(d v, -tau_c, tau_c).
     joint_friction_gain: the regularisation's slope d [N m s/rad or N s/m];
       |v| above tau_c / d slides at the full friction.
+    colour: the object's colour range, which the segmenter keeps.
     footprint_heights: ``[low, high]`` heights above the table [m] of the
       points whose outline gives the object's frame (the segmenter's
       footprint band, docs/method.md section 3): a horizontal slice of the
@@ -66,7 +99,9 @@ class ObjectConfig:
       segmenter's default band (the box's base, below its lid).
     """
 
-    kind: str = "box"
+    model: str = "box"
+    base_body: str = "box_base"
+    joint: str = "lid_hinge"
     x: float = 0.55
     y: float = 0.0
     yaw: float = 0.0
@@ -77,7 +112,8 @@ class ObjectConfig:
     joint_damping: float = 0.005
     joint_friction: float = 0.01
     joint_friction_gain: float = 1.0
-    footprint_heights: list[float] = dc.field(default_factory=list)
+    colour: ColourConfig = dc.field(default_factory=ColourConfig)
+    footprint_heights: typing.List[float] = dc.field(default_factory=list)
 
 
 @dc.dataclass
@@ -105,16 +141,13 @@ class ContactConfig:
     wood or plastic mu ~ 1, the hand's plastic housing and the arm's painted
     links mu ~ 0.3, the painted box, lid, drawer and handle mu ~ 0.5, the wooden
     table mu ~ 0.6. Stiffness 1e5 N/m per surface (5e4 N/m for two in series)
-    keeps a 30 N push to 0.6 mm of penetration."""
+    keeps a 30 N push to 0.6 mm of penetration. ``object``: every collision
+    geometry of the object's model."""
 
     finger_pads: SurfaceConfig = _surface(1.0)
     hand_housing: SurfaceConfig = _surface(0.3)
     arm: SurfaceConfig = _surface(0.3)
-    lid: SurfaceConfig = _surface(0.5)
-    box: SurfaceConfig = _surface(0.5)
-    drawer: SurfaceConfig = _surface(0.5)
-    handle: SurfaceConfig = _surface(0.5)
-    cabinet: SurfaceConfig = _surface(0.5)
+    object: SurfaceConfig = _surface(0.5)
     table: SurfaceConfig = _surface(0.6)
 
 
@@ -133,6 +166,24 @@ def default_camera() -> CameraConfig:
     camera.renderer_class = RenderEngineVtkParams(backend="EGL")
     camera.rgb, camera.depth, camera.label = True, True, True
     return camera
+
+
+def robot_directives() -> list:
+    """``ROBOT_DIRECTIVES`` as ``ModelDirective`` objects."""
+    return yaml_load_typed(schema=_Directives, data="directives:" + ROBOT_DIRECTIVES).directives
+
+
+def box_directives() -> list:
+    """The robot, the table and the shipped lidded box (the default scenario's models)."""
+    box = yaml_load_typed(schema=_Directives, data="""directives:
+- add_model: {name: box, file: "package://drake_skill_models/box.sdf"}
+""").directives
+    return robot_directives() + box
+
+
+@dc.dataclass
+class _Directives:
+    directives: typing.List[ModelDirective] = dc.field(default_factory=list)
 
 
 def default_plant() -> MultibodyPlantConfig:
@@ -216,12 +267,18 @@ class StationConfig:
     """Everything ``build_station`` needs.
 
     plant: Drake's MultibodyPlantConfig (time step, contact model, SAP...).
+    directives: the models, as Drake model directives (``ProcessModelDirectives``;
+      the manipulation course's ``Scenario`` does the same): ``ROBOT_DIRECTIVES``
+      (model instances ``panda``, ``panda_hand``, ``table``) and the object's
+      ``add_model`` (``package://drake_skill_models/...`` for the shipped
+      models; ``file:///...`` or a path relative to the scenario file for yours).
     q_home: the Panda's initial joint positions [rad].
     gripper_home: initial finger opening (distance between fingers) [m].
     enable_camera: add the RGB-D camera and its point cloud.
     """
 
     plant: MultibodyPlantConfig = dc.field(default_factory=default_plant)
+    directives: typing.List[ModelDirective] = dc.field(default_factory=lambda: box_directives())
     q_home: list[float] = dc.field(
         default_factory=lambda: [0.0, -0.6, 0.0, -2.4, 0.0, 1.8, 0.785])
     gripper_home: float = 0.0
@@ -284,9 +341,8 @@ def validate_station_config(config: StationConfig) -> StationConfig:
         _number(f"q_home[{i}]", q, limits.Q_MIN[i], limits.Q_MAX[i], what="a joint angle within Franka's limits [rad]")
     _number("gripper_home", config.gripper_home, 0.0, 2 * limits.FINGER_MAX, what="a finger opening [m]")
 
+    _validate_directives(config)
     obj = config.object
-    if obj.kind not in OBJECT_KINDS:
-        _bad("object.kind", obj.kind, f"one of {', '.join(OBJECT_KINDS)}")
     for name in ("x", "y", "yaw"):
         _number(f"object.{name}", getattr(obj, name), what="a finite pose coordinate")
     reach = math.hypot(obj.x, obj.y)
@@ -295,8 +351,17 @@ def validate_station_config(config: StationConfig) -> StationConfig:
              "an object 0.35..0.80 m from the robot's base (the Panda's reach for these skills)")
     _number("object.randomize_xy", obj.randomize_xy, 0.0, 0.1, what="a noise half-width [m]")
     _number("object.randomize_yaw", obj.randomize_yaw, 0.0, math.pi / 4, what="a noise half-width [rad]")
-    upper = 1.9 if obj.kind == "box" else 0.22
-    _number("object.initial_joint", obj.initial_joint, 0.0, upper, what="a position within the joint range")
+    _number("object.initial_joint", obj.initial_joint, what="a joint position (checked against the "
+            "model's joint limits when the station is built)")
+    c = obj.colour
+    for name in ("hue_min_deg", "hue_max_deg"):
+        _number(f"object.colour.{name}", getattr(c, name), 0.0, 360.0, what="a hue [deg]")
+    for name in ("saturation_min", "value_min"):
+        _number(f"object.colour.{name}", getattr(c, name), 0.0, 1.0, hi_open=True,
+                what="a lower bound in [0, 1) (1 or more keeps no pixel: an empty colour range)")
+    if c.hue_min_deg == c.hue_max_deg:
+        _bad("object.colour.hue_min_deg/hue_max_deg", (c.hue_min_deg, c.hue_max_deg),
+             "a hue range that holds the object's colour (min < max, or min > max to wrap through 0)")
     _number("object.joint_damping", obj.joint_damping, 0.0, 100.0, what="a damping")
     _number("object.joint_friction", obj.joint_friction, 0.0, 100.0, what="a friction force/torque")
     _number("object.joint_friction_gain", obj.joint_friction_gain, 0.0, 1e4, lo_open=True, what="a gain")
@@ -364,8 +429,8 @@ def validate_station_config(config: StationConfig) -> StationConfig:
 
     if config.success.joint:
         validate_success(config.success, "success")
-        if config.success.joint != object_joint_name(config):
-            _bad("success.joint", config.success.joint, f"the object's joint, '{object_joint_name(config)}'")
+        if config.success.joint != config.object.joint:
+            _bad("success.joint", config.success.joint, f"the object's joint, object.joint = '{config.object.joint}'")
     return config
 
 
@@ -389,6 +454,10 @@ def load_station_config(path: str | Path | None = None, *, data: str | None = No
             data=data, defaults=defaults or StationConfig())
     except RuntimeError as e:
         raise ValueError(f"station config ({where}): {e}") from e
+    base = path.parent if path is not None else Path.cwd()
+    for d in config.directives:                      # a user's model file, relative to the scenario
+        if d.add_model is not None and "://" not in d.add_model.file:
+            d.add_model.file = "file://" + str((base / d.add_model.file).resolve())
     try:
         return validate_station_config(config)
     except ValueError as e:
@@ -402,7 +471,58 @@ def dump_station_config(config: StationConfig) -> str:
 
 def object_joint_name(config: StationConfig) -> str:
     """The name of the scenario's object joint (the one ``object_state`` reports)."""
-    return OBJECT_JOINTS[config.object.kind]
+    return config.object.joint
+
+
+def _validate_directives(config: StationConfig) -> None:
+    """The robot's model instances and the object's are added; every model file exists."""
+    from drake_skill.station.models import PACKAGE_NAME, models_dir
+
+    added = {}
+    for i, d in enumerate(config.directives):
+        if d.add_model is not None:
+            added[d.add_model.name] = i
+            url = d.add_model.file
+            if url.startswith(f"package://{PACKAGE_NAME}/"):
+                path = models_dir() / url[len(f"package://{PACKAGE_NAME}/"):]
+            elif url.startswith("file://"):
+                path = Path(url[len("file://"):])
+            else:
+                _bad(f"directives[{i}].add_model.file", url,
+                     f"package://{PACKAGE_NAME}/<file>, file:///<absolute path>, or a path relative to the "
+                     "scenario file")
+            if not path.is_file():
+                _bad(f"directives[{i}].add_model.file", url, f"an existing model file ({path} does not exist)")
+    for name in ROBOT_MODELS:
+        if name not in added:
+            _bad("directives", sorted(added), f"the robot's models ({', '.join(ROBOT_MODELS)}): "
+                 "start the list with the robot's directives (drake_skill/station/config.py ROBOT_DIRECTIVES)")
+    obj = config.object
+    if obj.model not in added:
+        _bad("object.model", obj.model, f"the name of a model the directives add ({', '.join(sorted(added))})")
+    for field in ("base_body", "joint"):
+        if not getattr(obj, field):
+            _bad(f"object.{field}", getattr(obj, field), f"the name of the object model's {field.replace('_', ' ')}")
+    _check_object_model(config, config.directives[added[obj.model]].add_model.file)
+
+
+def _check_object_model(config: StationConfig, url: str) -> None:
+    """Parses the object's model alone (milliseconds): its base body, its joint and the
+    initial joint position within the joint's limits (``builder.object_parts``)."""
+    from pydrake.multibody.parsing import Parser
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from drake_skill.station.builder import object_parts
+    from drake_skill.station.models import add_package_paths
+
+    plant = MultibodyPlant(0.0)
+    parser = Parser(plant)
+    add_package_paths(parser.package_map())
+    try:
+        instance = parser.AddModels(url=url)[0]
+    except RuntimeError as e:
+        _bad("directives (the object's add_model.file)", url, f"a model Drake parses ({' '.join(str(e).split())[:200]})")
+    object_parts(plant, instance, config)
 
 
 def validate_success(rule: SuccessConfig, field: str = "success") -> SuccessConfig:

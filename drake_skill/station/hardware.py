@@ -327,17 +327,18 @@ class _ObjectModel:
         from pydrake.multibody.parsing import Parser
         from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 
-        from drake_skill.station.builder import _OBJECTS
-        from drake_skill.station.models import add_package_paths, model_url
+        from drake_skill.station.builder import object_parts
+        from drake_skill.station.models import add_package_paths
 
         builder = DiagramBuilder()
         self.plant, self.scene_graph = AddMultibodyPlantSceneGraph(builder, 0.0)
         parser = Parser(self.plant)
         add_package_paths(parser.package_map())
-        sdf, base_name, joint_name = _OBJECTS[station_config.object.kind]
-        self.object_instance = parser.AddModels(url=model_url(sdf))[0]
-        self.object_base = self.plant.GetBodyByName(base_name, self.object_instance)
-        self.object_joint = self.plant.GetJointByName(joint_name, self.object_instance)
+        o = station_config.object
+        url = next(d.add_model.file for d in station_config.directives
+                   if d.add_model is not None and d.add_model.name == o.model)
+        self.object_instance = parser.AddModels(url=url)[0]
+        self.object_base, self.object_joint = object_parts(self.plant, self.object_instance, station_config)
         self.plant.Finalize()
         self.config = station_config
 
