@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from drake_skill.cli.main import main
-from drake_skill.learning.loop import ARTIFACTS, EXPLORATION_SCALES, HELD_OUT_SEED0, plot_outcomes_by_placement
+from drake_skill.learning.evaluation import HELD_OUT_SEED0
+from drake_skill.learning.loop import ARTIFACTS, EXPLORATION_SCALES
+from drake_skill.learning.plots import plot_outcomes_by_placement
 from drake_skill.skill import Skill
 from drake_skill.station.builder import Station
 from pydrake.math import RollPitchYaw

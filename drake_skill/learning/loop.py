@@ -50,19 +50,17 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, atomic_write_text, load_npz
+from drake_skill.learning.evaluation import HELD_OUT_SEED0, evaluate_greedy
+from drake_skill.learning.plots import plot_learning_curve
 from drake_skill.learning.policy_search import METHODS, PER_STEP_METHODS, make_policy_search, policy_search_from_state
 
-__all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "LearnConfig", "LearnOutcome", "episode_rewards", "evaluate_greedy",
-           "evaluate_skill", "evaluation_table",
-           "frame_meshcat_camera", "learn", "plot_learning_curve", "pose_seed"]
-
-#: First seed of the held-out object poses (drake-skill evaluate uses the same).
-HELD_OUT_SEED0 = 900_000
+__all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "LearnConfig", "LearnOutcome", "episode_rewards", "frame_meshcat_camera",
+           "learn", "pose_seed"]
 
 #: What a learning run writes into its output directory.
 ARTIFACTS = ("config.json", "results.jsonl", "summary.json", "learning_curve.png", "skill/",
@@ -218,52 +216,6 @@ def episode_rewards(results, reward: str, per_step: bool) -> np.ndarray:
     return out
 
 
-def evaluate_greedy(pool, weights, seeds, progress: Callable | None = None) -> tuple[dict[str, Any], list]:
-    """Greedy executions of ``weights`` on the poses of ``seeds``: (report, results).
-
-    report: ``success_rate`` (ground truth), ``successes``, ``verdicts``,
-    ``returns``, ``final_object_state``, ``failures`` (reason -> count), ``seeds``.
-    """
-    seeds = [int(s) for s in seeds]
-    results = pool.map([(weights, s) for s in seeds], progress)
-    return results_report(seeds, results), results
-
-
-def results_report(seeds, results) -> dict[str, Any]:
-    """JSON-able summary of rollouts on the poses of ``seeds``: ground-truth
-    ``success_rate`` and ``successes``, ``verdicts``, ``returns`` (0 for a
-    failed rollout), ``final_object_state`` (None where failed), ``failures``
-    (reason -> count), per rollout its failure ``reasons`` ("" where it did
-    not fail) and ``object_poses`` (the object's true placement on the table,
-    [x m, y m, yaw rad] in the world frame; None where unknown), and
-    ``ik_warnings``."""
-    return {
-        "seeds": [int(s) for s in seeds],
-        "success_rate": float(np.mean([r.success for r in results])) if results else float("nan"),
-        "successes": [bool(r.success) for r in results],
-        "verdicts": [bool(r.verdict) for r in results],
-        "returns": [float(r.dense_return) for r in results],
-        "final_object_state": [None if not math.isfinite(r.final_object_state) else float(r.final_object_state)
-                               for r in results],
-        "failures": dict(Counter(r.reason for r in results if r.failed)),
-        "reasons": [str(r.reason) if r.failed else "" for r in results],
-        "object_poses": [_placement(r) for r in results],
-        "ik_warnings": int(sum(r.ik_warnings for r in results)),
-    }
-
-
-def _placement(result) -> list[float] | None:
-    """[x m, y m, yaw rad] of a rollout's true object pose (``RolloutResult.X_WO_true``), or
-    None where it is unknown (not finite)."""
-    if not np.all(np.isfinite(result.object_pose_true)):
-        return None
-    from pydrake.math import RollPitchYaw
-
-    X_WO = result.X_WO_true
-    x, y, _ = X_WO.translation()
-    return [float(x), float(y), float(RollPitchYaw(X_WO.rotation()).yaw_angle())]
-
-
 def exploration_size(search) -> float:
     """RMS standard deviation of the sampling distribution: sqrt(mean_b trace(s Sigma_b) / D)."""
     cov = search.sampling_covariances
@@ -274,112 +226,6 @@ def frame_meshcat_camera(meshcat, object_xyz) -> None:
     """Points Meshcat's camera at the robot and the object (robot base at the world origin)."""
     target = 0.5 * np.asarray(object_xyz, dtype=float) + np.array([0.0, 0.0, 0.25])   # between base and object
     meshcat.SetCameraPose(target + np.array([0.9, -1.3, 0.55]), target)
-
-
-def plot_learning_curve(curve: list[dict], path, title: str = "") -> Path:
-    """Greedy success and returns per episode (0 = before learning) to a PNG."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from drake_skill.fileio import write_figure_png
-
-    episodes = [c["episode"] for c in curve]
-    fig, (ax_s, ax_r) = plt.subplots(1, 2, figsize=(10, 3.8))
-    ax_s.plot(episodes, [float(c["greedy_success"]) for c in curve], "o-", color="tab:green")
-    ax_s.set_ylim(-0.05, 1.05)
-    ax_s.set_xlabel("episode (update)")
-    ax_s.set_ylabel("greedy success (ground truth)")
-    ax_s.set_xticks(episodes)
-    ax_r.plot(episodes, [c["greedy_return"] for c in curve], "o-", label="greedy return")
-    learned = [c for c in curve if c.get("mean_return") is not None]
-    if learned:
-        ax_r.plot([c["episode"] for c in learned], [c["mean_return"] for c in learned], "s--", label="mean rollout return")
-        ax_r.plot([c["episode"] for c in learned], [c["best_return"] for c in learned], "^:", label="best rollout return")
-    ax_r.set_xlabel("episode (update)")
-    ax_r.set_ylabel("learned return R(G)")
-    ax_r.set_xticks(episodes)
-    ax_r.legend(fontsize=8)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    try:
-        return write_figure_png(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
-
-
-#: Marker and colour per rollout outcome in :func:`plot_outcomes_by_placement`.
-_OUTCOME_STYLE = {"success": ("o", "tab:green"), "not achieved": ("o", "tab:orange"),
-                  "reflex": ("X", "tab:red")}
-
-
-def plot_outcomes_by_placement(report: dict[str, Any], path, title: str = "") -> Path:
-    """Where on the table each rollout of an :func:`evaluate_skill` or
-    :func:`explore_skill` report succeeded, to a PNG: one panel per policy,
-    each object placement (x, y [mm], its x axis drawn for the yaw) marked by
-    the outcome (success; run to the end without success, labelled with the
-    final lid angle [rad] or drawer travel [m]; a failure, by reason).
-
-    Plain imitation of a DMP succeeds in a band of placements around its
-    demonstration's (docs/method.md section 6): the plot shows the band.
-    """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from drake_skill.fileio import write_figure_png
-
-    if "policies" in report:
-        panels = []
-        for index, p in report["policies"].items():
-            role = " (learned)" if p["initial"] and report.get("learned") else " (initial)" if p["initial"] else ""
-            panels.append((f"DMP {index}{role}", p))
-    else:
-        panels = [(f"{len(report['seeds'])} exploratory rollouts", report)]
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.2), squeeze=False)
-    placed = np.array([1000.0 * np.asarray(pose[:2]) for _, p in panels
-                       for pose in p.get("object_poses", []) if pose is not None]).reshape(-1, 2)
-    centre = placed.mean(axis=0) if len(placed) else np.zeros(2)
-    half = max(float(np.abs(placed - centre).max()) if len(placed) else 0.0, 10.0) + 12.0
-    seen = set()                                   # one legend entry per outcome
-    for ax, (name, p) in zip(axes[0], panels):
-        for k, pose in enumerate(p.get("object_poses", [])):
-            if pose is None:
-                continue
-            x, y, yaw = 1000.0 * pose[0], 1000.0 * pose[1], pose[2]
-            reason = p["reasons"][k]
-            outcome = "success" if p["successes"][k] else (reason or "not achieved")
-            marker, colour = _OUTCOME_STYLE.get(outcome, ("X", "tab:purple"))
-            ax.plot([x, x + 8.0 * np.cos(yaw)], [y, y + 8.0 * np.sin(yaw)], "-", color="0.6", lw=1)
-            ax.plot(x, y, marker, color=colour, ms=8, label=None if outcome in seen else outcome)
-            seen.add(outcome)
-            final = p["final_object_state"][k]
-            if outcome == "not achieved" and final is not None:
-                final = 0.0 if abs(final) < 5e-3 else final      # no "-0.00" for a lid at rest on its seat
-                ax.annotate(f"{final:.2f}", (x, y), textcoords="offset points", xytext=(5, -10), fontsize=7)
-        ax.set_title(f"{name}: {p['success_rate'] * 100:.0f} % success", fontsize=10)
-        ax.set_xlabel("object x [mm] (away from the robot)")
-        ax.set_xlim(centre[0] - half, centre[0] + half)
-        ax.set_ylim(centre[1] - half, centre[1] + half)
-        ax.set_aspect("equal", adjustable="box")
-        ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("object y [mm]")
-    legend = {}                                    # label -> handle, over every panel
-    for ax in axes[0]:
-        handles, labels = ax.get_legend_handles_labels()
-        legend.update(zip(labels, handles))
-    rank = list(_OUTCOME_STYLE)                    # success first, failures by reason last
-    labels = sorted(legend, key=lambda label: (rank.index(label) if label in rank else len(rank), label))
-    fig.legend([legend[label] for label in labels], labels, loc="lower center", ncol=max(1, len(labels)),
-               fontsize=8, frameon=False)
-    fig.suptitle(title or f"{report['skill']}: outcome by object placement "
-                          f"(object frame {report['object_pose']})", fontsize=11)
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
-    try:
-        return write_figure_png(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
 
 
 @dc.dataclass
@@ -666,138 +512,3 @@ def station_config_object_xyz(station_config) -> np.ndarray:
     """Nominal object position of a StationConfig [m]."""
     o = station_config.object
     return np.array([o.x, o.y, 0.0])
-
-
-def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, station_config=None,
-                   rollout_config=None, workers: int = 1, ray_address: str | None = None,
-                   all_demos: bool = False, progress: bool = True) -> dict[str, Any]:
-    """Greedy success of a skill (initial or learned) over ``poses`` held-out object poses.
-
-    Executes the skill's policy (its initial DMP, the learned one in a skill
-    written by :func:`learn`; with ``all_demos`` each demonstration's DMP:
-    its weights, goal and duration)
-    on the poses of seeds ``seed0 .. seed0 + poses - 1`` and judges each from
-    the simulator's ground truth. Returns a JSON-able report: per policy
-    (key = DMP index) the :func:`evaluate_greedy` report, plus the settings.
-    """
-    from drake_skill.learning.rollout import RolloutConfig
-    from drake_skill.learning.workers import RunnerSpec, make_pool
-    from drake_skill.skill import Skill
-    from drake_skill.station.config import scenario_for_skill
-
-    if int(poses) < 1:
-        raise ValueError(f"poses: expected at least 1 held-out pose, got {poses}")
-    skill = Skill.load(skill_dir)
-    station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
-    rollout_config = (rollout_config or RolloutConfig()).validate()
-    seeds = [int(seed0) + i for i in range(int(poses))]
-    indices = range(len(skill.dmps)) if all_demos else [skill.initial_index]
-    report: dict[str, Any] = {"skill": skill.name, "skill_dir": str(Path(skill_dir)),
-                              "object_pose": rollout_config.object_pose, "seeds": seeds,
-                              "learned": "learning" in skill.info, "initial_index": skill.initial_index,
-                              "policies": {}}
-    start = time.perf_counter()
-    from tqdm import tqdm
-
-    for index in indices:
-        # Each demonstration's DMP whole: its weights with its own goal and
-        # duration (a pool per DMP: the runner's DmpSystem is built with them).
-        spec = RunnerSpec.create(skill_dir, station_config, rollout_config, dmp_index=index)
-        bar = tqdm(total=len(seeds), desc=f"DMP {index}", unit="rollout", disable=not progress,
-                   leave=False, file=sys.stderr)
-        try:
-            with make_pool(spec, workers, ray_address) as pool:
-                policy, _ = evaluate_greedy(pool, skill.dmps[index].weights, seeds, lambda i, r: bar.update(1))
-        finally:
-            bar.close()
-        policy["initial"] = index == skill.initial_index
-        report["policies"][str(index)] = policy
-    report["success_rate"] = report["policies"][str(skill.initial_index)]["success_rate"] \
-        if str(skill.initial_index) in report["policies"] else None
-    report["wall_s"] = round(time.perf_counter() - start, 1)
-    return report
-
-
-def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0, station_config=None,
-                  rollout_config=None, workers: int = 1, ray_address: str | None = None,
-                  progress: bool = True, exploration_scale: float | None = None) -> dict[str, Any]:
-    """Exploratory rollouts of a fitted skill: what the first episode of policy search sees.
-
-    Draws ``rollouts`` weight samples ``W ~ N(W_0, exploration_scale * Sigma_b^0)`` per basis
-    (PI^2-ES-Cov's first ``ask``, seeded by ``seed0``; ``exploration_scale``
-    None: the skill's, as ``learn``) and executes each on
-    the pose of seed ``seed0 + i``. Returns a JSON-able report: the returns
-    (learned dense reward; 0 for a failed rollout), their spread (min,
-    median, max, standard deviation), ground-truth successes, final object
-    states and failures by reason.
-    """
-    from drake_skill.learning.rollout import RolloutConfig
-    from drake_skill.learning.workers import RunnerSpec, make_pool
-    from drake_skill.skill import Skill
-    from drake_skill.station.config import scenario_for_skill
-
-    if int(rollouts) < 1:
-        raise ValueError(f"rollouts: expected at least 1 exploratory rollout, got {rollouts}")
-    skill = Skill.load(skill_dir)
-    station_config = station_config if station_config is not None else scenario_for_skill(skill.name)
-    rollout_config = (rollout_config or RolloutConfig()).validate()
-    if exploration_scale is None:
-        exploration_scale = default_exploration_scale(skill.name)
-    if not _valid_exploration_scale(exploration_scale):
-        raise ValueError(f"exploration_scale: expected a factor in (0, 100] on Sigma_b^0, got {exploration_scale!r}")
-    samples = make_policy_search("pi2-es-cov", skill.initial_weights, exploration_scale * skill.sigma0,
-                                 seed=int(seed0)).ask(int(rollouts))
-    seeds = [int(seed0) + i for i in range(int(rollouts))]
-    start = time.perf_counter()
-    spec = RunnerSpec.create(skill_dir, station_config, rollout_config)
-    from tqdm import tqdm
-    bar = tqdm(total=len(seeds), desc="exploration", unit="rollout", disable=not progress, leave=False,
-               file=sys.stderr)
-    try:
-        with make_pool(spec, workers, ray_address) as pool:
-            results = pool.map([(w, s) for w, s in zip(samples, seeds)], lambda i, r: bar.update(1))
-    finally:
-        bar.close()
-    report = {"skill": skill.name, "skill_dir": str(Path(skill_dir)), "object_pose": rollout_config.object_pose,
-              "exploration_scale": float(exploration_scale), **results_report(seeds, results)}
-    returns = np.array(report["returns"])
-    report["return_spread"] = {"min": float(returns.min()), "median": float(np.median(returns)),
-                               "max": float(returns.max()), "std": float(returns.std())}
-    report["wall_s"] = round(time.perf_counter() - start, 1)
-    return report
-
-
-def _final_state_text(finals) -> str:
-    """Median (min..max) of the final object states that exist, or "-"."""
-    finals = [v for v in finals if v is not None]
-    return f"{np.median(finals):.2f} ({min(finals):.2f}..{max(finals):.2f})" if finals else "-"
-
-
-def _failures_text(failures: dict) -> str:
-    return ", ".join(f"{k} {v}" for k, v in sorted(failures.items())) or "-"
-
-
-def exploration_table(report: dict[str, Any]) -> str:
-    """The people's view of :func:`explore_skill`'s report."""
-    s = report["return_spread"]
-    return "\n".join([
-        f"{report['skill']}: {len(report['seeds'])} exploratory rollouts from "
-        f"{report['exploration_scale']:g} x Sigma_0 (seeds {report['seeds'][0]}.."
-        f"{report['seeds'][-1]}), {report['wall_s']} s",
-        f"  return: min {s['min']:.1f}, median {s['median']:.1f}, max {s['max']:.1f}, std {s['std']:.1f}",
-        f"  success {report['success_rate'] * 100:.0f}%, final state {_final_state_text(report['final_object_state'])}, "
-        f"failures {_failures_text(report['failures'])}"])
-
-
-def evaluation_table(report: dict[str, Any]) -> str:
-    """The people's view of :func:`evaluate_skill`'s report."""
-    lines = [f"{'policy':<22}{'success':>9}{'verdict':>9}{'mean R':>9}{'final state':>22}  failures"]
-    for index, p in report["policies"].items():
-        name = f"DMP {index}" + (" (learned)" if p["initial"] and report.get("learned") else
-                                 " (initial)" if p["initial"] else "")
-        lines.append(f"{name:<22}{p['success_rate'] * 100:>8.0f}%{np.mean(p['verdicts']) * 100:>8.0f}%"
-                     f"{np.mean(p['returns']):>9.1f}{_final_state_text(p['final_object_state']):>22}  "
-                     f"{_failures_text(p['failures'])}")
-    lines.append(f"{report['skill']}: {len(report['seeds'])} held-out poses (seeds {report['seeds'][0]}.."
-                 f"{report['seeds'][-1]}), object frame {report['object_pose']}, {report['wall_s']} s")
-    return "\n".join(lines)
