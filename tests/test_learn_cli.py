@@ -2,12 +2,19 @@
 
 import dataclasses as dc
 import json
+import subprocess
+from importlib import metadata
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+import drake_skill
 from drake_skill.cli.main import main
-from drake_skill.learning.loop import ARTIFACTS, HELD_OUT_SEED0, plot_outcomes_by_placement
+from drake_skill.learning.evaluation import HELD_OUT_SEED0
+from drake_skill.learning.loop import ARTIFACTS
+from drake_skill.learning.plots import plot_outcomes_by_placement
+from drake_skill.learning.runlog import VERSIONED_PACKAGES, read_progress
 from drake_skill.skills import load_skill
 from drake_skill.skill import Skill
 from drake_skill.station.builder import Station
@@ -36,6 +43,13 @@ def test_learn_writes_every_artifact(learned, capsys):
     # No --exploration-scale: the skill's default, saved as the number used.
     name = Skill.load(shared["skill_dir"]).name
     assert json.loads((out / "config.json").read_text())["learn"]["exploration_scale"] == load_skill(name).exploration_scale
+    # config.json records the software the run used and the commit of the checkout it ran from.
+    versions = json.loads((out / "config.json").read_text())["versions"]
+    assert {k: versions[k] for k in VERSIONED_PACKAGES} == {k: metadata.version(k) for k in VERSIONED_PACKAGES}
+    checkout = Path(drake_skill.__file__).resolve().parents[1]
+    head = subprocess.run(["git", "-C", str(checkout), "rev-parse", "HEAD"], capture_output=True, text=True)
+    assert versions["git_commit"] == (head.stdout.strip() if head.returncode == 0 else None)
+    assert versions["git_commit"] is None or len(versions["git_commit"]) == 40
     assert summary["n_rollouts"] == 2
     records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
     # Seed 5: the greedy execution succeeds on its pose before learning and fails after
@@ -50,6 +64,10 @@ def test_learn_writes_every_artifact(learned, capsys):
     assert [r["type"] for r in records] == ["held_out", "rollout", "rollout", "greedy", "episode", "greedy",
                                            "episode", "held_out"]
     assert [r["episode"] for r in records if r["type"] == "episode"] == [0, 1]
+    # progress.csv: the curve's rows (greedy success True, False, as above).
+    rows = read_progress(out / "progress.csv")
+    assert [(r["episode"], r["rollouts_used"], r["greedy_success"]) for r in rows] == [(0, 0, 1), (1, 2, 0)]
+    assert [r["greedy_return"] for r in rows] == [c["greedy_return"] for c in summary["curve"]]
     for r in records:
         if r["type"] == "rollout":
             assert set(r) >= {"seed", "failed", "reason", "dense_return", "verdict", "success", "wall_s",

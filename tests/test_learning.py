@@ -1,16 +1,23 @@
-"""The learning run: rewards per method, seeds, configuration, and checkpoint/resume."""
+"""The learning run: rewards per method, seeds, configuration, checkpoint/resume and its logs."""
 
+import importlib.util
+import io
 import json
+import subprocess
+import sys
 import types
 
 import numpy as np
 import pytest
 
 from drake_skill.learning.loop import LearnConfig, episode_rewards, learn, pose_seed
+from drake_skill.learning.runlog import PROGRESS_COLUMNS, RunLog, _git_commit, progress_row, read_progress
 from drake_skill.skills import load_skill
 from drake_skill.skill import Skill
 
 from learning_support import rollout_config, shared_skill
+
+TENSORBOARD = importlib.util.find_spec("tensorboard") is not None
 
 
 def _result(failed=False, dense=0.0, filtered=(), verdict=False):
@@ -52,6 +59,15 @@ def test_exploration_scale_defaults_per_skill():
     assert load_skill("open").exploration_scale == 0.1 and load_skill("close").exploration_scale == 1.0
 
 
+def _scalars(log_dir, column):
+    """(step, value) of TensorBoard scalar ``progress/<column>`` in ``log_dir``, as TensorBoard shows them."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(log_dir))
+    events.Reload()
+    return [(e.step, e.value) for e in events.Scalars(f"progress/{column}")]
+
+
 def _numbers(records):
     """The records without wall-clock times."""
     def strip(r):
@@ -64,8 +80,18 @@ def test_resume_after_an_interruption_reproduces_the_uninterrupted_run(tmp_path_
     config = LearnConfig(episodes=2, rollouts=2, held_out=1, seed=3)
     kwargs = dict(station_config=shared["station"], rollout_config=rollout_config(), replay=False,
                   progress=False)
-    whole = learn(shared["skill_dir"], tmp_path / "whole", config, **kwargs)
+    rows = []
+    whole = learn(shared["skill_dir"], tmp_path / "whole", config, on_episode=rows.append, **kwargs)
     assert whole.complete and whole.search.episode == 2
+    # on_episode got each greedy-evaluated episode's row, progress.csv holds the same rows, and
+    # both are the curve's numbers (seed 3: the greedy execution succeeds only before learning).
+    assert rows == read_progress(tmp_path / "whole" / "progress.csv")
+    assert [r["episode"] for r in rows] == [0, 1, 2] and [r["rollouts_used"] for r in rows] == [0, 2, 4]
+    assert [r["greedy_success"] for r in rows] == [1, 0, 0]
+    for row, c in zip(rows, whole.summary["curve"], strict=True):
+        for column in ("greedy_return", "mean_return", "best_return", "exploration"):
+            assert row[column] == c[column]
+        assert row["failures"] == (None if c["episode"] == 0 else sum(c["failures"].values()))
 
     part = learn(shared["skill_dir"], tmp_path / "part", config, stop_after=1, **kwargs)
     assert not part.complete and part.search.episode == 1
@@ -79,8 +105,39 @@ def test_resume_after_an_interruption_reproduces_the_uninterrupted_run(tmp_path_
     with pytest.raises(ValueError, match="learn"):           # other settings: refused
         learn(shared["skill_dir"], tmp_path / "part", LearnConfig(episodes=2, rollouts=2, held_out=1, seed=4),
               resume=True, **kwargs)
-    resumed = learn(shared["skill_dir"], tmp_path / "part", config, resume=True, **kwargs)
+    # A crash after the logs were appended to, before the next checkpoint: results.jsonl holds the
+    # record that comes next and half a line, progress.csv a row, TensorBoard an event, none of them
+    # in the checkpoint. And the software changed (drake "0.0.0"): the versions are not settings.
+    part_dir = tmp_path / "part"
+    following = (tmp_path / "whole" / "results.jsonl").read_text().splitlines()[len(state["records"])]
+    with open(part_dir / "results.jsonl", "a") as f:
+        f.write(following + "\n" + following[:25])
+    with open(part_dir / "progress.csv", "a") as f:
+        f.write("0,0,1,1,999.0,,,1.0,,,,\n")
+    if TENSORBOARD:
+        from torch.utils.tensorboard import SummaryWriter
+
+        with SummaryWriter(str(part_dir / "tensorboard")) as writer:
+            writer.add_scalar("progress/greedy_return", 999.0, global_step=0)
+    saved = json.loads((part_dir / "config.json").read_text())
+    saved["versions"]["drake"] = "0.0.0"
+    (part_dir / "config.json").write_text(json.dumps(saved))
+    resumed_rows, log = [], io.StringIO()
+    resumed = learn(shared["skill_dir"], tmp_path / "part", config, resume=True, on_episode=resumed_rows.append,
+                    log=log, **kwargs)
     assert resumed.complete
+    assert "drake 0.0.0 -> " in log.getvalue()
+    assert json.loads((part_dir / "config.json").read_text())["versions"]["drake"] == "0.0.0"   # as started
+    # The logs were cut back to the checkpoint: the resumed run's are the uninterrupted run's.
+    assert resumed_rows == rows                   # the checkpoint's curve was empty: every row after it
+    assert (part_dir / "progress.csv").read_bytes() == (tmp_path / "whole" / "progress.csv").read_bytes()
+    if TENSORBOARD:                               # TensorBoard shows the curve, the stale event purged
+        for column in ("greedy_return", "greedy_success", "mean_return", "exploration"):
+            expected = [(r["episode"], np.float32(r[column])) for r in rows if r[column] is not None]
+            assert _scalars(tmp_path / "whole" / "tensorboard", column) == expected
+            assert _scalars(part_dir / "tensorboard", column) == expected
+    else:
+        assert not (part_dir / "tensorboard").exists()
 
     np.testing.assert_array_equal(resumed.search.mean, whole.search.mean)
     np.testing.assert_array_equal(resumed.search.covariances, whole.search.covariances)
@@ -114,5 +171,64 @@ def test_greedy_every_runs_greedy_executions_after_every_nth_update_and_the_last
     assert curve[1]["mean_return"] == pytest.approx((rewards[1] + rewards[2]) / 2)
     assert curve[1]["best_return"] == max(rewards[1], rewards[2])
     assert curve[2]["mean_return"] == pytest.approx(rewards[3])
+    # progress.csv: a row per greedy execution, the rollouts used by then, the block's numbers.
+    rows = read_progress(tmp_path / "run" / "progress.csv")
+    assert [(r["episode"], r["rollouts_used"]) for r in rows] == [(0, 0), (2, 2), (3, 3)]
+    assert [r["mean_return"] for r in rows] == [None, curve[1]["mean_return"], curve[2]["mean_return"]]
     with pytest.raises(ValueError, match="greedy_every"):
         LearnConfig(greedy_every=0).validate()
+
+
+def _curve_row(episode, greedy_return, mean_return=None, failures=None):
+    return {"episode": episode, "greedy_success": greedy_return > 100, "greedy_verdict": True,
+            "greedy_return": greedy_return, "mean_return": mean_return,
+            "best_return": None if mean_return is None else mean_return + 5.0, "exploration": 0.25,
+            "failures": failures or {}, "rollout_successes": 1, "ik_warnings": 0}
+
+
+@pytest.mark.skipif(not TENSORBOARD, reason="tensorboard is not installed (pip install 'drake-skill[tensorboard]')")
+def test_a_resumed_log_purges_the_tensorboard_events_after_its_checkpoint(tmp_path):
+    """Episodes 0-1 checkpointed, episode 2 logged before a crash (return 999), then resumed."""
+    first = RunLog(tmp_path, io.StringIO(), rollouts_per_episode=6)
+    first.start([], [], fresh=True)
+    curve = [_curve_row(0, 80.0), _curve_row(1, 120.5, 90.0, {"reflex": 2, "solver": 1})]
+    rows = [first.row(c) for c in curve]
+    first.row(_curve_row(2, 999.0, 1.0))
+    first.close()
+    assert len(read_progress(tmp_path / "progress.csv")) == 3
+    assert rows[1]["rollouts_used"] == 6 and rows[1]["failures"] == 3 and rows[1]["failure_reasons"] == "reflex:2 solver:1"
+    resumed = RunLog(tmp_path, io.StringIO(), rollouts_per_episode=6)
+    resumed.start([{"type": "held_out"}], curve, fresh=False)
+    resumed.row(_curve_row(2, 130.25, 100.0))
+    resumed.close()
+    assert [r["greedy_return"] for r in read_progress(tmp_path / "progress.csv")] == [80.0, 120.5, 130.25]
+    assert (tmp_path / "results.jsonl").read_text() == '{"type": "held_out"}\n'
+    assert _scalars(tmp_path / "tensorboard", "greedy_return") == [(0, 80.0), (1, 120.5), (2, 130.25)]
+    assert _scalars(tmp_path / "tensorboard", "rollouts_used") == [(0, 0.0), (1, 6.0), (2, 12.0)]
+    assert _scalars(tmp_path / "tensorboard", "mean_return") == [(1, 90.0), (2, 100.0)]
+
+
+def test_without_tensorboard_the_log_says_so_in_one_line(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "tensorboard", None)        # import tensorboard raises ImportError
+    note, seen = io.StringIO(), []
+    log = RunLog(tmp_path, note, rollouts_per_episode=2, on_episode=seen.append)
+    log.start([], [], fresh=True)
+    row = log.row(_curve_row(0, 50.0))
+    log.close()
+    assert note.getvalue().count("\n") == 1 and "pip install 'drake-skill[tensorboard]'" in note.getvalue()
+    assert not (tmp_path / "tensorboard").exists() and seen == [row]
+    assert (tmp_path / "progress.csv").read_text().splitlines() == [",".join(PROGRESS_COLUMNS),
+                                                                   "0,0,0,1,50.0,,,0.25,,,,"]
+    assert progress_row(_curve_row(0, 50.0), 2) == row
+
+
+def test_the_git_commit_is_recorded_only_for_a_drake_skill_checkout(tmp_path):
+    """None outside a git checkout, and None for a package inside some other repository (a venv in a checkout)."""
+    assert _git_commit(tmp_path) == (None, None)
+    subprocess.run(["git", "init", "-q", str(tmp_path)], check=True)
+    subprocess.run(["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-q",
+                    "--allow-empty", "-m", "x"], check=True)
+    (tmp_path / "venv" / "site-packages").mkdir(parents=True)
+    assert _git_commit(tmp_path / "venv" / "site-packages") == (None, None)
+    commit, dirty = _git_commit(tmp_path)
+    assert len(commit) == 40 and dirty is False

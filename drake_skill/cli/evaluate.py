@@ -42,7 +42,8 @@ HELP = "greedy success of a skill over held-out object poses (table + JSON)"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from drake_skill.learning.workers import default_workers
 
-    from drake_skill.learning.loop import HELD_OUT_SEED0, exploration_scales_text
+    from drake_skill.learning.evaluation import HELD_OUT_SEED0
+    from drake_skill.learning.loop import exploration_scales_text
 
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -75,7 +76,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from drake_skill.fileio import atomic_write_json
-    from drake_skill.learning.loop import evaluate_skill, evaluation_table, plot_outcomes_by_placement
+    from drake_skill.learning.evaluation import evaluate_skill, evaluation_table
+    from drake_skill.learning.plots import plot_outcomes_by_placement
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.skill import Skill
     from drake_skill.station.config import load_station_config
@@ -98,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
         station = load_station_config(args.station_config, defaults=station)
     rollout_config = RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived")
     if args.explore:
-        from drake_skill.learning.loop import exploration_table, explore_skill
+        from drake_skill.learning.evaluation import exploration_table, explore_skill
 
         report = explore_skill(args.skill_dir, rollouts=args.explore, seed0=args.seed0, station_config=station,
                                rollout_config=rollout_config, workers=args.workers,

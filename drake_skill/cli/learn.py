@@ -15,14 +15,17 @@ a greedy execution after every update, and the held-out success again.
 
 Writes into ``--out``:
 
-    config.json          the settings (``--resume`` checks them)
+    config.json          the settings (``--resume`` checks them) and the software versions and git commit
     results.jsonl        one JSON object per line: held_out, greedy, rollout, episode records
+    progress.csv         one row per greedy-evaluated episode, appended as the run goes (plot it live)
+    tensorboard/         the same rows as TensorBoard scalars (with pip install 'drake-skill[tensorboard]')
     summary.json         greedy success per episode, held-out success before/after, failures
     learning_curve.png   greedy success and returns per episode
     skill/               the learned skill (drake-skill evaluate --skill-dir OUT/skill)
     replay_first.html    Meshcat replay of the greedy execution before learning
     replay_last.html     ... and of the last one (open in a browser, press play)
-    checkpoint/          search state after every episode (--resume continues from it)
+    checkpoint/          run state after every episode (--resume continues from it; the appended
+                         logs are cut back to it, so no row appears twice)
 
 A table row per episode: greedy success (ground truth) and return, mean and
 best rollout return, exploration size (RMS standard deviation of the weight

@@ -39,7 +39,8 @@ from pathlib import Path
 from typing import Any
 
 from drake_skill.fileio import atomic_write_json
-from drake_skill.learning.loop import HELD_OUT_SEED0, REWARDS, LearnConfig
+from drake_skill.learning.evaluation import HELD_OUT_SEED0
+from drake_skill.learning.loop import REWARDS, LearnConfig
 from drake_skill.learning.policy_search import METHODS
 
 __all__ = ["DEFAULT_RUNS", "GridConfig", "GridOutcome", "GridTask", "before_path", "execute_task",
@@ -195,7 +196,7 @@ def _runner(spec):
 
 def _held_out(runner, weights, n: int, seed0: int) -> dict | None:
     """The ``evaluate_greedy`` report of ``weights`` on the held-out poses (None when n = 0)."""
-    from drake_skill.learning.loop import evaluate_greedy
+    from drake_skill.learning.evaluation import evaluate_greedy
     from drake_skill.learning.workers import SerialPool
 
     if n <= 0:

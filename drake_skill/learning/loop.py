@@ -28,14 +28,29 @@ from seeds derived from ``(seed, e, c)`` (:func:`pose_seed`); the held-out
 poses are the seeds ``held_out_seed0 + i`` (the same for every run, none of
 them a demonstration's or a training rollout's in practice).
 
-Artifacts in the output directory (:data:`ARTIFACTS`), all written
-atomically: ``config.json``, ``results.jsonl`` (one JSON object per line:
-``held_out``, ``greedy``, ``rollout`` and ``episode`` records),
+The run is a :class:`LearningRun` (settings, a :class:`RunState`, a pool)
+whose methods are the steps above: :meth:`~LearningRun.start` or
+:meth:`~LearningRun.resume`, :meth:`~LearningRun.batch` (an episode's
+rollouts and update, with the due greedy executions),
+:meth:`~LearningRun.checkpoint`, :meth:`~LearningRun.end`; :func:`learn`
+drives one from start to end (``drake-skill learn``, the experiment grid's
+runs, ``drake-skill hardware run --episodes``).
+
+Artifacts in the output directory (:data:`ARTIFACTS`): ``config.json``
+(the settings; ``versions``: the software versions and git commit the run
+started with, which a resume does not compare), ``results.jsonl`` (one JSON
+object per line: ``held_out``, ``greedy``, ``rollout`` and ``episode``
+records, appended at each checkpoint), ``progress.csv`` (one row per
+greedy-evaluated episode, appended as each is known; also the
+``on_episode`` callback's argument and, with the ``tensorboard`` package
+installed, the scalars in ``tensorboard/``; :mod:`~drake_skill.learning.runlog`),
 ``summary.json``, ``learning_curve.png``, ``skill/`` (the learned skill),
 ``replay_first.html`` / ``replay_last.html`` (Meshcat replays of the first
-and last greedy executions) and ``checkpoint/`` (``search.npz`` + ``state.json``,
-written after every episode; :func:`learn` with ``resume=True`` continues
-from it to the result an uninterrupted run gives).
+and last greedy executions) and ``checkpoint/`` (``search.npz`` + ``state.json``:
+the :class:`RunState`, written after every batch; :func:`learn` with
+``resume=True`` continues from it to the result an uninterrupted run gives,
+and cuts the appended logs back to it first, so that they hold no record or
+row twice). Every file but the appended logs is written atomically.
 
 This module imports no Drake at import time; the pools and the Meshcat
 replays import it when used.
@@ -55,17 +70,17 @@ from typing import Any, Callable
 import numpy as np
 
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, atomic_write_text, load_npz
+from drake_skill.learning.evaluation import HELD_OUT_SEED0, evaluate_greedy
+from drake_skill.learning.plots import plot_learning_curve
 from drake_skill.learning.policy_search import METHODS, PER_STEP_METHODS, make_policy_search, policy_search_from_state
+from drake_skill.learning.runlog import RunLog, software_versions
 
-__all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "LearnConfig", "LearnOutcome", "episode_rewards", "evaluate_greedy",
-           "evaluate_skill", "evaluation_table",
-           "frame_meshcat_camera", "learn", "plot_learning_curve", "pose_seed"]
+__all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "LearnConfig", "LearnOutcome", "LearningRun", "RunState", "episode_rewards",
+           "frame_meshcat_camera", "learn", "pose_seed"]
 
-#: First seed of the held-out object poses (drake-skill evaluate uses the same).
-HELD_OUT_SEED0 = 900_000
-
-#: What a learning run writes into its output directory.
-ARTIFACTS = ("config.json", "results.jsonl", "summary.json", "learning_curve.png", "skill/",
+#: What a learning run writes into its output directory (and ``tensorboard/`` where the
+#: ``tensorboard`` package is installed).
+ARTIFACTS = ("config.json", "results.jsonl", "progress.csv", "summary.json", "learning_curve.png", "skill/",
              "replay_first.html", "replay_last.html", "checkpoint/")
 
 REWARDS = ("dense", "sparse")
@@ -206,52 +221,6 @@ def episode_rewards(results, reward: str, per_step: bool) -> np.ndarray:
     return out
 
 
-def evaluate_greedy(pool, weights, seeds, progress: Callable | None = None) -> tuple[dict[str, Any], list]:
-    """Greedy executions of ``weights`` on the poses of ``seeds``: (report, results).
-
-    report: ``success_rate`` (ground truth), ``successes``, ``verdicts``,
-    ``returns``, ``final_object_state``, ``failures`` (reason -> count), ``seeds``.
-    """
-    seeds = [int(s) for s in seeds]
-    results = pool.map([(weights, s) for s in seeds], progress)
-    return results_report(seeds, results), results
-
-
-def results_report(seeds, results) -> dict[str, Any]:
-    """JSON-able summary of rollouts on the poses of ``seeds``: ground-truth
-    ``success_rate`` and ``successes``, ``verdicts``, ``returns`` (0 for a
-    failed rollout), ``final_object_state`` (None where failed), ``failures``
-    (reason -> count), per rollout its failure ``reasons`` ("" where it did
-    not fail) and ``object_poses`` (the object's true placement on the table,
-    [x m, y m, yaw rad] in the world frame; None where unknown), and
-    ``ik_warnings``."""
-    return {
-        "seeds": [int(s) for s in seeds],
-        "success_rate": float(np.mean([r.success for r in results])) if results else float("nan"),
-        "successes": [bool(r.success) for r in results],
-        "verdicts": [bool(r.verdict) for r in results],
-        "returns": [float(r.dense_return) for r in results],
-        "final_object_state": [None if not math.isfinite(r.final_object_state) else float(r.final_object_state)
-                               for r in results],
-        "failures": dict(Counter(r.reason for r in results if r.failed)),
-        "reasons": [str(r.reason) if r.failed else "" for r in results],
-        "object_poses": [_placement(r) for r in results],
-        "ik_warnings": int(sum(r.ik_warnings for r in results)),
-    }
-
-
-def _placement(result) -> list[float] | None:
-    """[x m, y m, yaw rad] of a rollout's true object pose (``RolloutResult.X_WO_true``), or
-    None where it is unknown (not finite)."""
-    if not np.all(np.isfinite(result.object_pose_true)):
-        return None
-    from pydrake.math import RollPitchYaw
-
-    X_WO = result.X_WO_true
-    x, y, _ = X_WO.translation()
-    return [float(x), float(y), float(RollPitchYaw(X_WO.rotation()).yaw_angle())]
-
-
 def exploration_size(search) -> float:
     """RMS standard deviation of the sampling distribution: sqrt(mean_b trace(s Sigma_b) / D)."""
     cov = search.sampling_covariances
@@ -262,112 +231,6 @@ def frame_meshcat_camera(meshcat, object_xyz) -> None:
     """Points Meshcat's camera at the robot and the object (robot base at the world origin)."""
     target = 0.5 * np.asarray(object_xyz, dtype=float) + np.array([0.0, 0.0, 0.25])   # between base and object
     meshcat.SetCameraPose(target + np.array([0.9, -1.3, 0.55]), target)
-
-
-def plot_learning_curve(curve: list[dict], path, title: str = "") -> Path:
-    """Greedy success and returns per episode (0 = before learning) to a PNG."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from drake_skill.fileio import write_figure_png
-
-    episodes = [c["episode"] for c in curve]
-    fig, (ax_s, ax_r) = plt.subplots(1, 2, figsize=(10, 3.8))
-    ax_s.plot(episodes, [float(c["greedy_success"]) for c in curve], "o-", color="tab:green")
-    ax_s.set_ylim(-0.05, 1.05)
-    ax_s.set_xlabel("episode (update)")
-    ax_s.set_ylabel("greedy success (ground truth)")
-    ax_s.set_xticks(episodes)
-    ax_r.plot(episodes, [c["greedy_return"] for c in curve], "o-", label="greedy return")
-    learned = [c for c in curve if c.get("mean_return") is not None]
-    if learned:
-        ax_r.plot([c["episode"] for c in learned], [c["mean_return"] for c in learned], "s--", label="mean rollout return")
-        ax_r.plot([c["episode"] for c in learned], [c["best_return"] for c in learned], "^:", label="best rollout return")
-    ax_r.set_xlabel("episode (update)")
-    ax_r.set_ylabel("learned return R(G)")
-    ax_r.set_xticks(episodes)
-    ax_r.legend(fontsize=8)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    try:
-        return write_figure_png(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
-
-
-#: Marker and colour per rollout outcome in :func:`plot_outcomes_by_placement`.
-_OUTCOME_STYLE = {"success": ("o", "tab:green"), "not achieved": ("o", "tab:orange"),
-                  "reflex": ("X", "tab:red")}
-
-
-def plot_outcomes_by_placement(report: dict[str, Any], path, title: str = "") -> Path:
-    """Where on the table each rollout of an :func:`evaluate_skill` or
-    :func:`explore_skill` report succeeded, to a PNG: one panel per policy,
-    each object placement (x, y [mm], its x axis drawn for the yaw) marked by
-    the outcome (success; run to the end without success, labelled with the
-    final lid angle [rad] or drawer travel [m]; a failure, by reason).
-
-    Plain imitation of a DMP succeeds in a band of placements around its
-    demonstration's (docs/method.md section 6): the plot shows the band.
-    """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from drake_skill.fileio import write_figure_png
-
-    if "policies" in report:
-        panels = []
-        for index, p in report["policies"].items():
-            role = " (learned)" if p["initial"] and report.get("learned") else " (initial)" if p["initial"] else ""
-            panels.append((f"DMP {index}{role}", p))
-    else:
-        panels = [(f"{len(report['seeds'])} exploratory rollouts", report)]
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.2), squeeze=False)
-    placed = np.array([1000.0 * np.asarray(pose[:2]) for _, p in panels
-                       for pose in p.get("object_poses", []) if pose is not None]).reshape(-1, 2)
-    centre = placed.mean(axis=0) if len(placed) else np.zeros(2)
-    half = max(float(np.abs(placed - centre).max()) if len(placed) else 0.0, 10.0) + 12.0
-    seen = set()                                   # one legend entry per outcome
-    for ax, (name, p) in zip(axes[0], panels):
-        for k, pose in enumerate(p.get("object_poses", [])):
-            if pose is None:
-                continue
-            x, y, yaw = 1000.0 * pose[0], 1000.0 * pose[1], pose[2]
-            reason = p["reasons"][k]
-            outcome = "success" if p["successes"][k] else (reason or "not achieved")
-            marker, colour = _OUTCOME_STYLE.get(outcome, ("X", "tab:purple"))
-            ax.plot([x, x + 8.0 * np.cos(yaw)], [y, y + 8.0 * np.sin(yaw)], "-", color="0.6", lw=1)
-            ax.plot(x, y, marker, color=colour, ms=8, label=None if outcome in seen else outcome)
-            seen.add(outcome)
-            final = p["final_object_state"][k]
-            if outcome == "not achieved" and final is not None:
-                final = 0.0 if abs(final) < 5e-3 else final      # no "-0.00" for a lid at rest on its seat
-                ax.annotate(f"{final:.2f}", (x, y), textcoords="offset points", xytext=(5, -10), fontsize=7)
-        ax.set_title(f"{name}: {p['success_rate'] * 100:.0f} % success", fontsize=10)
-        ax.set_xlabel("object x [mm] (away from the robot)")
-        ax.set_xlim(centre[0] - half, centre[0] + half)
-        ax.set_ylim(centre[1] - half, centre[1] + half)
-        ax.set_aspect("equal", adjustable="box")
-        ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("object y [mm]")
-    legend = {}                                    # label -> handle, over every panel
-    for ax in axes[0]:
-        handles, labels = ax.get_legend_handles_labels()
-        legend.update(zip(labels, handles))
-    rank = list(_OUTCOME_STYLE)                    # success first, failures by reason last
-    labels = sorted(legend, key=lambda label: (rank.index(label) if label in rank else len(rank), label))
-    fig.legend([legend[label] for label in labels], labels, loc="lower center", ncol=max(1, len(labels)),
-               fontsize=8, frameon=False)
-    fig.suptitle(title or f"{report['skill']}: outcome by object placement "
-                          f"(object frame {report['object_pose']})", fontsize=11)
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
-    try:
-        return write_figure_png(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
 
 
 @dc.dataclass
@@ -402,10 +265,6 @@ class _Replay:
         return result
 
 
-def _jsonl(records) -> str:
-    return "".join(json.dumps(r, sort_keys=True) + "\n" for r in records)
-
-
 def _print(*args, file=None):
     print(*args, file=file or sys.stdout, flush=True)
 
@@ -424,11 +283,358 @@ def _table_row(row: dict) -> str:
             f"{row['exploration']:8.4f}  {n_fail:>4}  {failures}")
 
 
+@dc.dataclass
+class RunState:
+    """A learning run between two batches: what ``checkpoint/`` saves and a resume loads.
+
+    search: the policy search (``search.npz``: its ``state_dict``, arrays
+      only; ``search.episode`` updates done, ``search.mean`` W: (B, 7)).
+    records: every record so far, in order (``results.jsonl``'s lines).
+    curve: the learning-curve rows so far, one per greedy execution run.
+    pending: greedy executions still to run, in episode order: each its
+      curve row without the greedy result, and ``mean``, the weights W
+      (B x 7, nested lists) it executes (its update's mean).
+    held_out_before: the held-out record before learning (None: off).
+    """
+
+    search: Any
+    records: list = dc.field(default_factory=list)
+    curve: list = dc.field(default_factory=list)
+    pending: list = dc.field(default_factory=list)
+    held_out_before: dict | None = None
+
+    def save(self, checkpoint: Path) -> None:
+        """``checkpoint/search.npz`` and ``checkpoint/state.json``, each written atomically."""
+        atomic_save_npz(checkpoint / "search.npz", {k: np.asarray(v) for k, v in self.search.state_dict().items()})
+        atomic_write_json(checkpoint / "state.json", {
+            "format": _CHECKPOINT_FORMAT, "episode": self.search.episode, "records": self.records,
+            "curve": self.curve, "held_out_before": self.held_out_before, "pending": self.pending})
+
+    @classmethod
+    def load(cls, checkpoint: Path) -> "RunState":
+        """The state :meth:`save` wrote (format 1: one pending greedy execution, of the current mean)."""
+        state = json.loads((checkpoint / "state.json").read_text())
+        search = policy_search_from_state(load_npz(checkpoint / "search.npz"))
+        pending = state.get("pending")
+        if state.get("format", 1) == 1:
+            pending = [] if pending is None else [{**pending, "mean": search.mean.tolist()}]
+        return cls(search, state["records"], state["curve"], pending, state.get("held_out_before"))
+
+
+class LearningRun:
+    """One learning run into ``out_dir``: its settings, its :class:`RunState`, the pool it runs on.
+
+    The steps (what :func:`learn` does with them)::
+
+        run = LearningRun(skill_dir, out_dir, config, ...)   # settings only
+        run.start(force) or run.resume()  # files, pool, held-out before (start)
+        while not run.finished:
+            run.batch()                   # an episode's rollouts + due greedy executions
+            run.checkpoint()              # checkpoint/ and the appended logs
+        outcome = run.end()               # held-out after, learned skill, plot, summary
+        run.close()                       # the pool (also as a context manager)
+
+    The arguments are :func:`learn`'s. ``state`` is None until started or
+    resumed; the numbers depend on ``config`` alone (and the skill, station
+    and rollout settings), not on the pool or on where a run was resumed.
+    """
+
+    def __init__(self, skill_dir, out_dir, config: LearnConfig | None = None, *, station_config=None,
+                 rollout_config=None, workers: int = 1, ray_address: str | None = None, use_ray: bool = False,
+                 meshcat=None, replay: bool = True, progress: bool = True, log=None, runner=None,
+                 on_episode: Callable[[dict], None] | None = None):
+        from pydrake.common.yaml import yaml_dump_typed
+
+        from drake_skill.learning.rollout import RolloutConfig
+        from drake_skill.skill import Skill
+
+        config = (config or LearnConfig()).validate()
+        self.skill_dir, self.out_dir = Path(skill_dir), Path(out_dir)
+        self.skill = Skill.load(self.skill_dir)
+        if config.exploration_scale is None:
+            config = dc.replace(config, exploration_scale=float(self.skill.spec.exploration_scale))
+        self.config = config
+        self.station_config = station_config if station_config is not None else self.skill.station_config()
+        self.rollout_config = (rollout_config or RolloutConfig()).validate()
+        #: config.json without "versions": what a resume must find unchanged.
+        self.run_config = {"learn": dc.asdict(config), "skill": self.skill.name,
+                           "skill_dir": str(self.skill_dir.resolve()),
+                           "station": yaml_dump_typed(self.station_config), "rollout": dc.asdict(self.rollout_config)}
+        self.checkpoint_dir = self.out_dir / "checkpoint"
+        self.stream = log or sys.stdout
+        self.state: RunState | None = None
+        self._pool_options = dict(workers=workers, ray_address=ray_address, use_ray=use_ray, runner=runner)
+        self._meshcat, self._replay, self._progress = meshcat, replay, progress
+        self._pool = self._viewer = self._replayer = None
+        self._log = RunLog(self.out_dir, self.stream, config.rollouts, on_episode)
+        self._logged = 0                      # records already in results.jsonl
+        self._exploration_at: dict[int, float] = {}
+        self._wall_start = time.perf_counter()
+
+    # ------------------------------------------------------------------ start / resume
+    def start(self, force: bool = False) -> RunState:
+        """A fresh run: ``config.json`` (with ``versions``), the initial search, the held-out success
+        before learning, the greedy execution of W_0 pending, the first checkpoint."""
+        if (self.checkpoint_dir / "state.json").exists() and not force:
+            raise FileExistsError(f"{self.out_dir} holds a learning run (checkpoint/); pass --resume to continue "
+                                  "it, --force to start over, or choose another --out")
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        for name in ("results.jsonl", "progress.csv", "summary.json", "learning_curve.png", "replay_first.html",
+                     "replay_last.html"):
+            (self.out_dir / name).unlink(missing_ok=True)
+        atomic_write_json(self.out_dir / "config.json", {**self.run_config, "versions": software_versions()})
+        config = self.config
+        search = make_policy_search(config.method, self.skill.initial_weights,
+                                    config.exploration_scale * self.skill.sigma0, **config.search_options())
+        self.state = RunState(search)
+        self._open()
+        self._log.start([], [], fresh=True)
+        self.state.held_out_before = self._held_out("before")
+        # Episode 0: the greedy execution before learning is still to run.
+        self.state.pending = [{"episode": 0, "mean_return": None, "best_return": None,
+                               "exploration": exploration_size(search), "failures": {},
+                               "mean": search.mean.tolist()}]
+        self.checkpoint()
+        _print(f"{self.skill.name}: {config.method}, {config.reward} reward, weighting {self.weighting or '-'}, "
+               f"{config.episodes} episodes x {config.rollouts} rollouts, {self._pool.n_workers} worker(s)",
+               file=self.stream)
+        self._print_table()
+        return self.state
+
+    def resume(self) -> RunState:
+        """The run in ``out_dir`` from its checkpoint; refuses other settings. The logs are cut back
+        to the checkpoint (:mod:`~drake_skill.learning.runlog`)."""
+        if not (self.checkpoint_dir / "state.json").is_file():
+            raise FileNotFoundError(f"{self.checkpoint_dir}: no checkpoint to resume (state.json missing); "
+                                    "run without --resume to start")
+        saved = json.loads((self.out_dir / "config.json").read_text())
+        started_with = saved.pop("versions", None)
+        if saved != self.run_config:
+            changed = sorted(k for k in set(saved) | set(self.run_config) if saved.get(k) != self.run_config.get(k))
+            raise ValueError(f"{self.out_dir}: --resume with different settings than the run it continues "
+                             f"({', '.join(changed)} differ); use the same options or another --out")
+        self.state = RunState.load(self.checkpoint_dir)
+        _print(f"resuming {self.out_dir} after episode {self.state.search.episode} of {self.config.episodes}",
+               file=self.stream)
+        if started_with is not None:
+            now = software_versions()
+            changed = [f"{k} {started_with.get(k)} -> {now[k]}" for k in now if started_with.get(k) != now[k]]
+            if changed:
+                _print(f"note: the run started with other software ({', '.join(changed)}); config.json keeps "
+                       "the versions it started with", file=self.stream)
+        self._open()
+        self._log.start(self.state.records, self.state.curve, fresh=False)
+        self._logged = len(self.state.records)
+        self._print_table()
+        return self.state
+
+    def _open(self) -> None:
+        """The replay viewer and the pool (:func:`~drake_skill.learning.workers.make_pool`)."""
+        from drake_skill.learning.workers import RunnerSpec, make_pool
+
+        spec = RunnerSpec.create(self.skill_dir, self.station_config, self.rollout_config)
+        live = self._meshcat is not None
+        if live or self._replay:
+            from pydrake.geometry import Meshcat
+
+            view_meshcat = self._meshcat if live else Meshcat()
+            if not live:
+                view_meshcat.Delete()
+            self._viewer = spec.build(meshcat=view_meshcat)
+            self._replayer = _Replay(view_meshcat, live)
+            if live:
+                frame_meshcat_camera(view_meshcat, station_config_object_xyz(self.station_config))
+        options = self._pool_options
+        local_runner = self._viewer if (live and int(options["workers"]) == 1
+                                        and not (options["use_ray"] or options["ray_address"])) else None
+        if options["runner"] is not None:      # a given runner (the hardware station's): rollouts run on it
+            local_runner = options["runner"]
+        self._pool = make_pool(spec, options["workers"], options["ray_address"], options["use_ray"],
+                               runner=local_runner)
+        self._exploration_at = {r["episode"]: r["exploration"] for r in self.state.records
+                                if "exploration" in r and r["type"] == "rollout"}
+        self._wall_start = time.perf_counter()
+
+    def close(self) -> None:
+        """Closes the pool and the logs (idempotent)."""
+        if self._pool is not None:
+            self._pool.close()
+            self._pool = None
+        self._log.close()
+
+    def __enter__(self) -> "LearningRun":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ the batches
+    @property
+    def weighting(self) -> str | None:
+        """The rollout weighting the search uses (the method's default when not given; None: none)."""
+        weighting = self.state.search.state_dict().get("option_weighting")
+        return None if weighting is None else str(weighting)
+
+    @property
+    def rollouts_left(self) -> bool:
+        """Whether updates remain (``search.episode`` < episodes)."""
+        return self.state.search.episode < self.config.episodes
+
+    @property
+    def finished(self) -> bool:
+        """No update and no greedy execution left: :meth:`end` is next."""
+        return not self.state.pending and not self.rollouts_left
+
+    def batch(self) -> bool:
+        """One batch: the next episode's C rollouts and its update (while updates remain), with the
+        pending greedy executions beside them once :data:`GREEDY_BATCH` are due (all, after the last
+        update). Returns whether it ran rollouts. Records, curve rows and the progress log follow;
+        the checkpoint is :meth:`checkpoint`'s."""
+        config, state = self.config, self.state
+        search = state.search
+        rollouts_now = self.rollouts_left
+        due = state.pending if (not rollouts_now or len(state.pending) >= GREEDY_BATCH) else []
+        tasks, greedy_results = [], []
+        for p in due:
+            g_seed, path = pose_seed(config.seed, p["episode"], None), self._greedy_path(p["episode"])
+            if self._viewer is not None and (self._meshcat is not None or path is not None):
+                greedy_results.append(self._replayer.run(self._viewer, np.asarray(p["mean"]), g_seed, path))
+            else:
+                greedy_results.append(None)
+                tasks.append((np.asarray(p["mean"]), g_seed))
+        n_pooled = len(tasks)
+        if rollouts_now:
+            episode = search.episode + 1
+            self._exploration_at[episode] = exploration_size(search)
+            samples = search.ask(config.rollouts)
+            seeds = [pose_seed(config.seed, episode, c) for c in range(config.rollouts)]
+            tasks += list(zip(samples, seeds))
+        results = self._map(tasks, f"episode {search.episode + 1}/{config.episodes}" if rollouts_now else "greedy")
+        pooled, results = iter(results[:n_pooled]), results[n_pooled:]
+        for p, greedy_result in zip(due, greedy_results):
+            greedy_result = greedy_result if greedy_result is not None else next(pooled)
+            g = {"type": "greedy", "episode": p["episode"], **greedy_result.summary()}
+            state.records.append(g)
+            row = {**{k: v for k, v in p.items() if k != "mean"}, "greedy_success": g["success"],
+                   "greedy_return": g["dense_return"], "greedy_verdict": g["verdict"]}
+            state.curve.append(row)
+            state.records.append({"type": "episode", **row})
+            _print(_table_row(row), file=self.stream)
+            self._log.row(row)
+        state.pending = state.pending[len(due):]
+        if rollouts_now:
+            search.tell(samples, episode_rewards(results, config.reward, config.method in PER_STEP_METHODS))
+            returns = episode_rewards(results, config.reward, False)
+            for c, r in enumerate(results):
+                state.records.append({"type": "rollout", "episode": episode, "index": c,
+                                      "reward": float(returns[c]), "exploration": self._exploration_at[episode],
+                                      **r.summary()})
+            if episode % int(config.greedy_every) == 0 or episode == config.episodes:
+                state.pending.append(_block_row(state.records, episode, int(config.greedy_every),
+                                                self._exploration_at, search.mean))
+        return rollouts_now
+
+    def checkpoint(self) -> None:
+        """Appends the new records to ``results.jsonl``, then saves the state to ``checkpoint/``."""
+        self._flush_records()
+        self.state.save(self.checkpoint_dir)
+
+    def _flush_records(self) -> None:
+        self._log.records(self.state.records[self._logged:])
+        self._logged = len(self.state.records)
+
+    # ------------------------------------------------------------------ the end
+    def end(self) -> LearnOutcome:
+        """Held-out success after learning, the learned skill (``skill/``), ``learning_curve.png`` and
+        ``summary.json``."""
+        config, state, skill = self.config, self.state, self.skill
+        held_out_after = self._held_out("after")
+        self._flush_records()
+        # The learned skill: the initial DMP's weights replaced by the final mean.
+        learned = dc.replace(skill, dmps=list(skill.dmps), info=dict(skill.info))
+        learned.dmps[skill.initial_index] = dc.replace(skill.initial_dmp, weights=state.search.mean)
+        learned.info["learning"] = {"method": config.method, "reward": config.reward,
+                                    "weighting": self.weighting, "episodes": config.episodes,
+                                    "rollouts": config.rollouts, "seed": config.seed,
+                                    "initial_skill": str(self.skill_dir.resolve())}
+        learned.save(self.out_dir / "skill", overwrite=True)
+        plot_learning_curve(state.curve, self.out_dir / "learning_curve.png",
+                            title=f"{skill.name}: {config.method}, {config.reward} reward")
+        curve = state.curve
+        summary = {
+            "skill": skill.name, "method": config.method, "reward": config.reward, "weighting": self.weighting,
+            "episodes": config.episodes, "rollouts": config.rollouts, "seed": config.seed,
+            "workers": self._pool.n_workers, "curve": curve,
+            "greedy_success": [bool(c["greedy_success"]) for c in curve],
+            "held_out_before": None if state.held_out_before is None else state.held_out_before["success_rate"],
+            "held_out_after": None if held_out_after is None else held_out_after["success_rate"],
+            "failures": dict(sum((Counter(c["failures"]) for c in curve), Counter())),
+            "n_rollouts": config.episodes * config.rollouts,
+            "wall_s_this_call": round(time.perf_counter() - self._wall_start, 1),
+            "artifacts": [a for a in (*ARTIFACTS, "tensorboard/")
+                          if (self.out_dir / a.rstrip("/")).exists() or a == "summary.json"],
+        }
+        atomic_write_json(self.out_dir / "summary.json", summary)
+        return LearnOutcome(summary, self.out_dir, True, state.search)
+
+    def interrupted(self) -> LearnOutcome:
+        """The outcome of a run stopped after a checkpoint (``resume`` continues it)."""
+        return LearnOutcome({"interrupted_after_episode": self.state.search.episode}, self.out_dir, False,
+                            self.state.search)
+
+    # ------------------------------------------------------------------ helpers
+    def _bar(self, total: int, desc: str):
+        from tqdm import tqdm
+        return tqdm(total=total, desc=desc, unit="rollout", disable=not self._progress, leave=False, file=sys.stderr)
+
+    def _map(self, tasks, desc: str) -> list:
+        """``pool.map`` of (weights, seed) tasks with a progress bar."""
+        if not tasks:
+            return []
+        b = self._bar(len(tasks), desc)
+        try:
+            return self._pool.map(tasks, lambda i, r: b.update(1))
+        finally:
+            b.close()
+
+    def _greedy_path(self, episode: int) -> Path | None:
+        """Where the replay of the greedy execution after update ``episode`` goes (first and last only)."""
+        if self._replay and episode == 0:
+            return self.out_dir / "replay_first.html"
+        if self._replay and episode == self.config.episodes:
+            return self.out_dir / "replay_last.html"
+        return None
+
+    def _held_out(self, phase: str) -> dict | None:
+        """The greedy success of the current mean on the held-out poses, as a record (None: off)."""
+        config = self.config
+        if config.held_out <= 0:
+            return None
+        seeds = [config.held_out_seed0 + i for i in range(config.held_out)]
+        b = self._bar(len(seeds), f"held-out poses ({phase})")
+        try:
+            report, _ = evaluate_greedy(self._pool, self.state.search.mean, seeds, lambda i, r: b.update(1))
+        finally:
+            b.close()
+        record = {"type": "held_out", "phase": phase, "episode": self.state.search.episode, **report}
+        self.state.records.append(record)
+        _print(f"held-out greedy success {phase} learning: {report['success_rate'] * 100:.0f} % of "
+               f"{len(seeds)} poses", file=self.stream)
+        return record
+
+    def _print_table(self) -> None:
+        _print(_table_header(), file=self.stream)
+        for row in self.state.curve:
+            _print(_table_row(row), file=self.stream)
+
+
 def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_config=None,
           rollout_config=None, workers: int = 1, ray_address: str | None = None, use_ray: bool = False,
           resume: bool = False, force: bool = False, meshcat=None, replay: bool = True,
-          progress: bool = True, stop_after: int | None = None, log=None, runner=None) -> LearnOutcome:
-    """Runs (or resumes) a learning run of the skill in ``skill_dir``; see the module docstring.
+          progress: bool = True, stop_after: int | None = None, log=None, runner=None,
+          on_episode: Callable[[dict], None] | None = None) -> LearnOutcome:
+    """Runs (or resumes) a learning run of the skill in ``skill_dir``: a :class:`LearningRun`
+    driven to its end; see the module docstring.
 
     station_config: the scenario (default the skill's, ``Skill.station_config``); rollout_config:
     :class:`~drake_skill.learning.rollout.RolloutConfig`; workers / ray_address /
@@ -438,351 +644,29 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
     return after this many episodes in this call (checkpointed; ``resume``
     continues); log: a text stream for the tables (default stdout); runner: a
     built RolloutRunner to run every rollout on (``workers`` = 1; e.g. on the
-    hardware station, ``drake-skill hardware run --episodes``).
+    hardware station, ``drake-skill hardware run --episodes``); on_episode:
+    called with each ``progress.csv`` row (a dict,
+    :func:`~drake_skill.learning.runlog.progress_row`) after its greedy
+    execution, in episode order (after a resume: from the first row not in
+    the checkpoint).
     """
-    from pydrake.common.yaml import yaml_dump_typed
-
-    from drake_skill.learning.rollout import RolloutConfig
-    from drake_skill.learning.workers import RunnerSpec, make_pool
-    from drake_skill.skill import Skill
-
-    config = (config or LearnConfig()).validate()
-    out_dir = Path(out_dir)
-    skill_dir = Path(skill_dir)
-    skill = Skill.load(skill_dir)
-    if config.exploration_scale is None:
-        config = dc.replace(config, exploration_scale=float(skill.spec.exploration_scale))
-    station_config = station_config if station_config is not None else skill.station_config()
-    rollout_config = (rollout_config or RolloutConfig()).validate()
-    run_config = {"learn": dc.asdict(config), "skill": skill.name, "skill_dir": str(skill_dir.resolve()),
-                  "station": yaml_dump_typed(station_config), "rollout": dc.asdict(rollout_config)}
-    checkpoint = out_dir / "checkpoint"
-    stream = log or sys.stdout
-
-    # ----------------------------------------------------------- fresh or resumed
-    if resume:
-        if not (checkpoint / "state.json").is_file():
-            raise FileNotFoundError(f"{checkpoint}: no checkpoint to resume (state.json missing); "
-                                    "run without --resume to start")
-        state = json.loads((checkpoint / "state.json").read_text())
-        saved = json.loads((out_dir / "config.json").read_text())
-        if saved != run_config:
-            changed = sorted(k for k in set(saved) | set(run_config) if saved.get(k) != run_config.get(k))
-            raise ValueError(f"{out_dir}: --resume with different settings than the run it continues "
-                             f"({', '.join(changed)} differ); use the same options or another --out")
-        search = policy_search_from_state(load_npz(checkpoint / "search.npz"))
-        records, curve = state["records"], state["curve"]
-        held_out_before, pending = state.get("held_out_before"), state.get("pending")
-        if state.get("format", 1) == 1:         # one greedy execution pending, of the current mean
-            pending = [] if pending is None else [{**pending, "mean": search.mean.tolist()}]
-        _print(f"resuming {out_dir} after episode {search.episode} of {config.episodes}", file=stream)
-    else:
-        if (checkpoint / "state.json").exists() and not force:
-            raise FileExistsError(f"{out_dir} holds a learning run (checkpoint/); pass --resume to continue "
-                                  "it, --force to start over, or choose another --out")
-        out_dir.mkdir(parents=True, exist_ok=True)
-        for name in ("results.jsonl", "summary.json", "learning_curve.png", "replay_first.html",
-                     "replay_last.html"):
-            (out_dir / name).unlink(missing_ok=True)
-        atomic_write_json(out_dir / "config.json", run_config)
-        search = make_policy_search(config.method, skill.initial_weights,
-                                    config.exploration_scale * skill.sigma0, **config.search_options())
-        records, curve, held_out_before, pending = [], [], None, []
-    per_step = config.method in PER_STEP_METHODS
-    weighting = search.state_dict().get("option_weighting")   # the method's default when not given
-    weighting = None if weighting is None else str(weighting)
-
-    # ----------------------------------------------------------- pools and replays
-    spec = RunnerSpec.create(skill_dir, station_config, rollout_config)
-    viewer = None
-    live = meshcat is not None
-    if live or replay:
-        from pydrake.geometry import Meshcat
-
-        view_meshcat = meshcat if live else Meshcat()
-        if not live:
-            view_meshcat.Delete()
-        viewer = spec.build(meshcat=view_meshcat)
-        replayer = _Replay(view_meshcat, live)
-        if live:
-            frame_meshcat_camera(view_meshcat, station_config_object_xyz(station_config))
-    local_runner = viewer if (live and int(workers) == 1 and not (use_ray or ray_address)) else None
-    if runner is not None:                 # a given runner (the hardware station's): rollouts run on it
-        local_runner = runner
-    pool = make_pool(spec, workers, ray_address, use_ray, runner=local_runner)
-    wall_start = time.perf_counter()
-
-    def bar(total, desc):
-        from tqdm import tqdm
-        return tqdm(total=total, desc=desc, unit="rollout", disable=not progress, leave=False, file=sys.stderr)
-
-    def greedy_path(episode: int) -> Path | None:
-        if replay and episode == 0:
-            return out_dir / "replay_first.html"
-        if replay and episode == config.episodes:
-            return out_dir / "replay_last.html"
-        return None
-
-    def held_out(phase: str) -> dict | None:
-        if config.held_out <= 0:
-            return None
-        seeds = [config.held_out_seed0 + i for i in range(config.held_out)]
-        b = bar(len(seeds), f"held-out poses ({phase})")
-        try:
-            report, _ = evaluate_greedy(pool, search.mean, seeds, lambda i, r: b.update(1))
-        finally:
-            b.close()
-        record = {"type": "held_out", "phase": phase, "episode": search.episode, **report}
-        records.append(record)
-        _print(f"held-out greedy success {phase} learning: {report['success_rate'] * 100:.0f} % of "
-               f"{len(seeds)} poses", file=stream)
-        return record
-
-    def save_checkpoint() -> None:
-        state = search.state_dict()
-        atomic_save_npz(checkpoint / "search.npz", {k: np.asarray(v) for k, v in state.items()})
-        atomic_write_json(checkpoint / "state.json", {
-            "format": _CHECKPOINT_FORMAT, "episode": search.episode, "records": records, "curve": curve,
-            "held_out_before": held_out_before, "pending": pending})
-        atomic_write_text(out_dir / "results.jsonl", _jsonl(records))
-
-    try:
-        if not resume:
-            held_out_before = held_out("before")
-            # Episode 0: the greedy execution before learning is still to run.
-            pending = [{"episode": 0, "mean_return": None, "best_return": None,
-                        "exploration": exploration_size(search), "failures": {},
-                        "mean": search.mean.tolist()}]
-            save_checkpoint()
-            _print(f"{skill.name}: {config.method}, {config.reward} reward, weighting {weighting or '-'}, "
-                   f"{config.episodes} episodes x {config.rollouts} rollouts, {pool.n_workers} worker(s)",
-                   file=stream)
-        _print(_table_header(), file=stream)
-        for row in curve:
-            _print(_table_row(row), file=stream)
-        ran = 0
-        exploration_at = {r["episode"]: r["exploration"] for r in records if "exploration" in r and r["type"] == "rollout"}
-        # Each batch: an episode's rollouts, and beside them the greedy
-        # executions of earlier updates once GREEDY_BATCH of them are due
-        # (pending; each needs only its update's mean, kept with it). A
-        # checkpoint follows every batch.
-        while pending or search.episode < config.episodes:
-            rollouts_now = search.episode < config.episodes
-            if rollouts_now and stop_after is not None and ran >= stop_after:
-                return LearnOutcome({"interrupted_after_episode": search.episode}, out_dir, False, search)
-            due = pending if (not rollouts_now or len(pending) >= GREEDY_BATCH) else []
-            tasks, greedy_results = [], []
-            for p in due:
-                g_seed, path = pose_seed(config.seed, p["episode"], None), greedy_path(p["episode"])
-                if viewer is not None and (live or path is not None):
-                    greedy_results.append(replayer.run(viewer, np.asarray(p["mean"]), g_seed, path))
-                else:
-                    greedy_results.append(None)
-                    tasks.append((np.asarray(p["mean"]), g_seed))
-            n_pooled = len(tasks)
-            if rollouts_now:
-                episode = search.episode + 1
-                exploration_at[episode] = exploration_size(search)
-                samples = search.ask(config.rollouts)
-                seeds = [pose_seed(config.seed, episode, c) for c in range(config.rollouts)]
-                tasks += list(zip(samples, seeds))
-            desc = f"episode {search.episode + 1}/{config.episodes}" if rollouts_now else "greedy"
-            results = []
-            if tasks:
-                b = bar(len(tasks), desc)
-                try:
-                    results = pool.map(tasks, lambda i, r: b.update(1))
-                finally:
-                    b.close()
-            pooled, results = iter(results[:n_pooled]), results[n_pooled:]
-            for p, greedy_result in zip(due, greedy_results):
-                greedy_result = greedy_result if greedy_result is not None else next(pooled)
-                g = {"type": "greedy", "episode": p["episode"], **greedy_result.summary()}
-                records.append(g)
-                row = {**{k: v for k, v in p.items() if k != "mean"}, "greedy_success": g["success"],
-                       "greedy_return": g["dense_return"], "greedy_verdict": g["verdict"]}
-                curve.append(row)
-                records.append({"type": "episode", **row})
-                _print(_table_row(row), file=stream)
-            pending = pending[len(due):]
-            if rollouts_now:
-                values = episode_rewards(results, config.reward, per_step)
-                search.tell(samples, values)
-                returns = episode_rewards(results, config.reward, False)
-                for c, r in enumerate(results):
-                    records.append({"type": "rollout", "episode": episode, "index": c,
-                                    "reward": float(returns[c]), "exploration": exploration_at[episode],
-                                    **r.summary()})
-                if episode % int(config.greedy_every) == 0 or episode == config.episodes:
-                    pending.append(_block_row(records, episode, int(config.greedy_every), exploration_at,
-                                              search.mean))
-                ran += 1
-            save_checkpoint()
-
-        held_out_after = held_out("after")
-        atomic_write_text(out_dir / "results.jsonl", _jsonl(records))
-        # The learned skill: the initial DMP's weights replaced by the final mean.
-        learned = dc.replace(skill, dmps=list(skill.dmps), info=dict(skill.info))
-        learned.dmps[skill.initial_index] = dc.replace(skill.initial_dmp, weights=search.mean)
-        learned.info["learning"] = {"method": config.method, "reward": config.reward,
-                                    "weighting": weighting, "episodes": config.episodes,
-                                    "rollouts": config.rollouts, "seed": config.seed,
-                                    "initial_skill": str(skill_dir.resolve())}
-        learned.save(out_dir / "skill", overwrite=True)
-        plot_learning_curve(curve, out_dir / "learning_curve.png",
-                            title=f"{skill.name}: {config.method}, {config.reward} reward")
-        summary = {
-            "skill": skill.name, "method": config.method, "reward": config.reward, "weighting": weighting,
-            "episodes": config.episodes, "rollouts": config.rollouts, "seed": config.seed,
-            "workers": pool.n_workers, "curve": curve,
-            "greedy_success": [bool(c["greedy_success"]) for c in curve],
-            "held_out_before": None if held_out_before is None else held_out_before["success_rate"],
-            "held_out_after": None if held_out_after is None else held_out_after["success_rate"],
-            "failures": dict(sum((Counter(c["failures"]) for c in curve), Counter())),
-            "n_rollouts": config.episodes * config.rollouts,
-            "wall_s_this_call": round(time.perf_counter() - wall_start, 1),
-            "artifacts": [a for a in ARTIFACTS if (out_dir / a.rstrip("/")).exists() or a == "summary.json"],
-        }
-        atomic_write_json(out_dir / "summary.json", summary)
-        return LearnOutcome(summary, out_dir, True, search)
-    finally:
-        pool.close()
+    with LearningRun(skill_dir, out_dir, config, station_config=station_config, rollout_config=rollout_config,
+                     workers=workers, ray_address=ray_address, use_ray=use_ray, meshcat=meshcat, replay=replay,
+                     progress=progress, log=log, runner=runner, on_episode=on_episode) as run:
+        if resume:
+            run.resume()
+        else:
+            run.start(force=force)
+        batches = 0
+        while not run.finished:
+            if run.rollouts_left and stop_after is not None and batches >= stop_after:
+                return run.interrupted()
+            batches += run.batch()
+            run.checkpoint()
+        return run.end()
 
 
 def station_config_object_xyz(station_config) -> np.ndarray:
     """Nominal object position of a StationConfig [m]."""
     o = station_config.object
     return np.array([o.x, o.y, 0.0])
-
-
-def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, station_config=None,
-                   rollout_config=None, workers: int = 1, ray_address: str | None = None,
-                   all_demos: bool = False, progress: bool = True) -> dict[str, Any]:
-    """Greedy success of a skill (initial or learned) over ``poses`` held-out object poses.
-
-    Executes the skill's policy (its initial DMP, the learned one in a skill
-    written by :func:`learn`; with ``all_demos`` each demonstration's DMP:
-    its weights, goal and duration)
-    on the poses of seeds ``seed0 .. seed0 + poses - 1`` and judges each from
-    the simulator's ground truth. Returns a JSON-able report: per policy
-    (key = DMP index) the :func:`evaluate_greedy` report, plus the settings.
-    """
-    from drake_skill.learning.rollout import RolloutConfig
-    from drake_skill.learning.workers import RunnerSpec, make_pool
-    from drake_skill.skill import Skill
-
-    if int(poses) < 1:
-        raise ValueError(f"poses: expected at least 1 held-out pose, got {poses}")
-    skill = Skill.load(skill_dir)
-    station_config = station_config if station_config is not None else skill.station_config()
-    rollout_config = (rollout_config or RolloutConfig()).validate()
-    seeds = [int(seed0) + i for i in range(int(poses))]
-    indices = range(len(skill.dmps)) if all_demos else [skill.initial_index]
-    report: dict[str, Any] = {"skill": skill.name, "skill_dir": str(Path(skill_dir)),
-                              "object_pose": rollout_config.object_pose, "seeds": seeds,
-                              "learned": "learning" in skill.info, "initial_index": skill.initial_index,
-                              "policies": {}}
-    start = time.perf_counter()
-    from tqdm import tqdm
-
-    for index in indices:
-        # Each demonstration's DMP whole: its weights with its own goal and
-        # duration (a pool per DMP: the runner's DmpSystem is built with them).
-        spec = RunnerSpec.create(skill_dir, station_config, rollout_config, dmp_index=index)
-        bar = tqdm(total=len(seeds), desc=f"DMP {index}", unit="rollout", disable=not progress,
-                   leave=False, file=sys.stderr)
-        try:
-            with make_pool(spec, workers, ray_address) as pool:
-                policy, _ = evaluate_greedy(pool, skill.dmps[index].weights, seeds, lambda i, r: bar.update(1))
-        finally:
-            bar.close()
-        policy["initial"] = index == skill.initial_index
-        report["policies"][str(index)] = policy
-    report["success_rate"] = report["policies"][str(skill.initial_index)]["success_rate"] \
-        if str(skill.initial_index) in report["policies"] else None
-    report["wall_s"] = round(time.perf_counter() - start, 1)
-    return report
-
-
-def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0, station_config=None,
-                  rollout_config=None, workers: int = 1, ray_address: str | None = None,
-                  progress: bool = True, exploration_scale: float | None = None) -> dict[str, Any]:
-    """Exploratory rollouts of a fitted skill: what the first episode of policy search sees.
-
-    Draws ``rollouts`` weight samples ``W ~ N(W_0, exploration_scale * Sigma_b^0)`` per basis
-    (PI^2-ES-Cov's first ``ask``, seeded by ``seed0``; ``exploration_scale``
-    None: the skill's, as ``learn``) and executes each on
-    the pose of seed ``seed0 + i``. Returns a JSON-able report: the returns
-    (learned dense reward; 0 for a failed rollout), their spread (min,
-    median, max, standard deviation), ground-truth successes, final object
-    states and failures by reason.
-    """
-    from drake_skill.learning.rollout import RolloutConfig
-    from drake_skill.learning.workers import RunnerSpec, make_pool
-    from drake_skill.skill import Skill
-
-    if int(rollouts) < 1:
-        raise ValueError(f"rollouts: expected at least 1 exploratory rollout, got {rollouts}")
-    skill = Skill.load(skill_dir)
-    station_config = station_config if station_config is not None else skill.station_config()
-    rollout_config = (rollout_config or RolloutConfig()).validate()
-    if exploration_scale is None:
-        exploration_scale = float(skill.spec.exploration_scale)
-    if not _valid_exploration_scale(exploration_scale):
-        raise ValueError(f"exploration_scale: expected a factor in (0, 100] on Sigma_b^0, got {exploration_scale!r}")
-    samples = make_policy_search("pi2-es-cov", skill.initial_weights, exploration_scale * skill.sigma0,
-                                 seed=int(seed0)).ask(int(rollouts))
-    seeds = [int(seed0) + i for i in range(int(rollouts))]
-    start = time.perf_counter()
-    spec = RunnerSpec.create(skill_dir, station_config, rollout_config)
-    from tqdm import tqdm
-    bar = tqdm(total=len(seeds), desc="exploration", unit="rollout", disable=not progress, leave=False,
-               file=sys.stderr)
-    try:
-        with make_pool(spec, workers, ray_address) as pool:
-            results = pool.map([(w, s) for w, s in zip(samples, seeds)], lambda i, r: bar.update(1))
-    finally:
-        bar.close()
-    report = {"skill": skill.name, "skill_dir": str(Path(skill_dir)), "object_pose": rollout_config.object_pose,
-              "exploration_scale": float(exploration_scale), **results_report(seeds, results)}
-    returns = np.array(report["returns"])
-    report["return_spread"] = {"min": float(returns.min()), "median": float(np.median(returns)),
-                               "max": float(returns.max()), "std": float(returns.std())}
-    report["wall_s"] = round(time.perf_counter() - start, 1)
-    return report
-
-
-def _final_state_text(finals) -> str:
-    """Median (min..max) of the final object states that exist, or "-"."""
-    finals = [v for v in finals if v is not None]
-    return f"{np.median(finals):.2f} ({min(finals):.2f}..{max(finals):.2f})" if finals else "-"
-
-
-def _failures_text(failures: dict) -> str:
-    return ", ".join(f"{k} {v}" for k, v in sorted(failures.items())) or "-"
-
-
-def exploration_table(report: dict[str, Any]) -> str:
-    """The people's view of :func:`explore_skill`'s report."""
-    s = report["return_spread"]
-    return "\n".join([
-        f"{report['skill']}: {len(report['seeds'])} exploratory rollouts from "
-        f"{report['exploration_scale']:g} x Sigma_0 (seeds {report['seeds'][0]}.."
-        f"{report['seeds'][-1]}), {report['wall_s']} s",
-        f"  return: min {s['min']:.1f}, median {s['median']:.1f}, max {s['max']:.1f}, std {s['std']:.1f}",
-        f"  success {report['success_rate'] * 100:.0f}%, final state {_final_state_text(report['final_object_state'])}, "
-        f"failures {_failures_text(report['failures'])}"])
-
-
-def evaluation_table(report: dict[str, Any]) -> str:
-    """The people's view of :func:`evaluate_skill`'s report."""
-    lines = [f"{'policy':<22}{'success':>9}{'verdict':>9}{'mean R':>9}{'final state':>22}  failures"]
-    for index, p in report["policies"].items():
-        name = f"DMP {index}" + (" (learned)" if p["initial"] and report.get("learned") else
-                                 " (initial)" if p["initial"] else "")
-        lines.append(f"{name:<22}{p['success_rate'] * 100:>8.0f}%{np.mean(p['verdicts']) * 100:>8.0f}%"
-                     f"{np.mean(p['returns']):>9.1f}{_final_state_text(p['final_object_state']):>22}  "
-                     f"{_failures_text(p['failures'])}")
-    lines.append(f"{report['skill']}: {len(report['seeds'])} held-out poses (seeds {report['seeds'][0]}.."
-                 f"{report['seeds'][-1]}), object frame {report['object_pose']}, {report['wall_s']} s")
-    return "\n".join(lines)
