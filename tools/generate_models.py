@@ -399,11 +399,46 @@ def drawer() -> str:
                 "out along -x (0 = shut), a bar handle 5 cm proud of its front.")
 
 
+# Box with a sliding lid (the fourth skill, Slide: drake_skill/skills/slide.yaml).
+# Base frame: centre of the bottom face; the lid slides out along +y (sideways,
+# away from the camera) and carries a ridge near its -y edge to push against.
+SLIDER_BASE = (0.20, 0.30, 0.10)
+SLIDER_LID = (0.20, 0.30, 0.015)
+SLIDER_RIDGE = (0.12, 0.02, 0.03)    # across the lid, centred 0.12 m from its middle toward -y
+SLIDER_RIDGE_Y = -0.12
+SLIDER_TRAVEL = 0.20
+GREEN = "0.15 0.60 0.20 1"
+
+
+def slider() -> str:
+    bx, by, bz = SLIDER_BASE
+    lx, ly, lz = SLIDER_LID
+    rx, ry, rz = SLIDER_RIDGE
+    body = f"""    <link name="slider_base">
+{_inertial(2.0, (0, 0, bz / 2), _box_inertia(2.0, SLIDER_BASE))}{_box("base", (0, 0, bz / 2), SLIDER_BASE, GREEN)}    </link>
+    <link name="slider_lid">
+      <pose relative_to="lid_slide"/>
+{_inertial(0.4, (0, 0, lz / 2), _box_inertia(0.4, SLIDER_LID))}{_box("lid", (0, 0, lz / 2), SLIDER_LID, GREEN)}{_box("ridge", (0, SLIDER_RIDGE_Y, lz + rz / 2), SLIDER_RIDGE, GREEN)}    </link>
+    <joint name="lid_slide" type="prismatic">
+      <pose relative_to="slider_base">{_pose((0.0, 0.0, bz))}</pose>
+      <parent>slider_base</parent>
+      <child>slider_lid</child>
+      <axis>
+        <xyz>0 1 0</xyz>
+        <limit><lower>0.0</lower><upper>{SLIDER_TRAVEL}</upper><effort>0</effort></limit>
+      </axis>
+    </joint>
+"""
+    return _sdf("slider", body,
+                "A green box (0.20 x 0.30 x 0.10 m) whose 1.5 cm lid slides out along +y "
+                "(0 = shut, up to 0.20 m), with a 3 cm ridge across it near its -y edge.")
+
+
 PACKAGE_XML = """<?xml version="1.0"?>
 <package format="2">
   <name>drake_skill_models</name>
   <version>0.1.0</version>
-  <description>Models shipped with drake-skill (Panda, table, box, drawer).</description>
+  <description>Models shipped with drake-skill (Panda, table, box, drawer, sliding-lid box).</description>
   <maintainer email="drake-skill@example.invalid">drake-skill</maintainer>
   <license>BSD-3-Clause</license>
 </package>
@@ -417,6 +452,7 @@ def main() -> None:
         "table.sdf": table(),
         "box.sdf": box(),
         "drawer.sdf": drawer(),
+        "slider.sdf": slider(),
         "package.xml": PACKAGE_XML,
     }
     files.update(MESHES)
