@@ -1,29 +1,20 @@
-"""Where drake-skill's model files live, and the package map that finds them.
+"""The Drake package map for drake-skill's model files.
 
-The models (Panda, table, box, drawer, trained PCAE weights) are in the
-repository's ``models/`` folder, registered as the package
-``drake_skill_models`` so SDF files are addressed as
-``package://drake_skill_models/<file>``. ``DRAKE_SKILL_MODELS`` overrides the
-folder.
+The models folder is the installed package ``drake_skill.models``
+(``drake_skill.resources.models_dir``, found with ``importlib.resources``).
+For Drake it is the package ``drake_skill_models``, so SDF files are
+addressed as ``package://drake_skill_models/<file>``. ``DRAKE_SKILL_MODELS``
+overrides the folder.
 """
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
+from drake_skill.resources import model_path, models_dir
+
+__all__ = ["PACKAGE_NAME", "add_package_paths", "model_path", "model_url", "models_dir"]
 
 PACKAGE_NAME = "drake_skill_models"
-
-
-def models_dir() -> Path:
-    """The folder holding the models (``$DRAKE_SKILL_MODELS`` or ``<repo>/models``)."""
-    env = os.environ.get("DRAKE_SKILL_MODELS")
-    path = Path(env) if env else Path(__file__).resolve().parents[2] / "models"
-    if not (path / "package.xml").is_file():
-        raise FileNotFoundError(
-            f"drake-skill models folder {path} has no package.xml; set DRAKE_SKILL_MODELS "
-            "to the repository's models/ folder")
-    return path
+"""The Drake (package.xml) package name of the models folder."""
 
 
 def model_url(filename: str) -> str:
