@@ -68,7 +68,7 @@ from pydrake.systems.sensors import PixelType, RgbdSensor
 from pydrake.common.value import AbstractValue, Value
 
 from drake_skill.station.controller import X_FLANGE_HAND, X_HAND_TCP, EndEffectorController, make_finger_limiter
-from drake_skill.station.models import add_package_paths, model_url
+from drake_skill.station.models import add_package_paths, add_panda_illustration, model_url
 from drake_skill.station.config import StationConfig, validate_station_config
 from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor
 
@@ -158,6 +158,7 @@ def add_scene_plant(builder: DiagramBuilder, config: StationConfig) -> ScenePlan
     table = parser.AddModels(url=model_url("table.sdf"))[0]
     sdf, base_name, joint_name = _OBJECTS[config.object.kind]
     obj = parser.AddModels(url=model_url(sdf))[0]
+    add_panda_illustration(plant, scene_graph, (arm, hand))  # Meshcat only: Franka's meshes
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
     plant.WeldFrames(plant.GetFrameByName("panda_link8", arm),
                      plant.GetFrameByName("panda_hand", hand), X_FLANGE_HAND)
