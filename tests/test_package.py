@@ -109,3 +109,14 @@ def test_installed_wheel_loads_the_panda_and_the_encoder(wheel, tmp_path):
     code = np.array(out["code"])
     assert code.shape == (128,) and np.all(np.isfinite(code))
     np.testing.assert_allclose(code, expected, rtol=1e-5, atol=1e-6)
+
+
+def test_models_folder_override_must_hold_package_xml(tmp_path, monkeypatch):
+    from drake_skill.resources import models_dir
+
+    assert (models_dir() / "package.xml").is_file()
+    monkeypatch.setenv("DRAKE_SKILL_MODELS", str(tmp_path))
+    with pytest.raises(FileNotFoundError, match=f"DRAKE_SKILL_MODELS={tmp_path} has no package.xml"):
+        models_dir()
+    (tmp_path / "package.xml").write_text("<package/>")
+    assert models_dir() == tmp_path

@@ -143,3 +143,12 @@ def _gltf_objects(html: str) -> int:
     """How many of the static page's (base64, msgpack'd) Meshcat commands carry one of Franka's glTF files."""
     chunks = [base64.b64decode(c) for c in re.findall(r"base64,([A-Za-z0-9+/=]+)", html)]
     return sum(b"franka_description" in c and b'"asset"' in c for c in chunks)
+
+
+def test_a_table_naming_a_missing_mesh_is_refused(tmp_path, monkeypatch):
+    (tmp_path / "franka_panda").mkdir()
+    (tmp_path / "package.xml").write_text("<package/>")
+    (tmp_path / "franka_panda" / "panda_illustration.yaml").write_text("panda_link0: [{mesh: nowhere.gltf}]\n")
+    monkeypatch.setenv("DRAKE_SKILL_MODELS", str(tmp_path))
+    with pytest.raises(ValueError, match=r"panda_illustration.yaml: panda_link0: .*nowhere.gltf"):
+        panda_illustration_table()
