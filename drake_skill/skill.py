@@ -90,8 +90,8 @@ def default_skill_config(skill) -> SkillConfig:
 
 
 def _pcae_path(config: SkillConfig) -> Path:
-    from drake_skill.perception.pcae import DEFAULT_WEIGHTS
-    return Path(config.pcae_weights) if config.pcae_weights else Path(DEFAULT_WEIGHTS)
+    from drake_skill.perception.pcae import default_weights
+    return Path(config.pcae_weights) if config.pcae_weights else default_weights()
 
 
 def hold_invalid(codes: np.ndarray, valid: np.ndarray, name: str = "frames") -> np.ndarray:

@@ -12,7 +12,7 @@ from scipy.special import logsumexp
 from drake_skill.action.dmp import DmpConfig, fit_demonstrations
 from drake_skill.fileio import atomic_save_npz, file_sha256, load_npz
 from drake_skill.perception.features import GoalFeatures
-from drake_skill.perception.pcae import DEFAULT_WEIGHTS
+from drake_skill.perception.pcae import default_weights
 from drake_skill.reward.goal_model import GoalHMM, GoalModelConfig, _backward_log, forward_backward, forward_log
 from drake_skill.reward.pomrp import OffModelConfig, Pomrp, PomrpConfig, fit_pomrp
 from drake_skill.skill import Skill, SkillConfig
@@ -52,7 +52,7 @@ def synthetic_skill(seed: int = 0) -> Skill:
     info = {"pca_explained_variance": float(pca.total_explained_variance_ratio),
             "demo_lengths": lengths.tolist(), "demo_returns": [pomrp.episode_return(G) for G in goal],
             "demo_verdicts": [pomrp.verdict(G) for G in goal], "seed": seed}
-    return Skill(config, fit.dmps, fit.initial_index, fit.sigma0, pca, pomrp, DEFAULT_WEIGHTS, info,
+    return Skill(config, fit.dmps, fit.initial_index, fit.sigma0, pca, pomrp, default_weights(), info,
                  gripper_opening=0.08)
 
 

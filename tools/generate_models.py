@@ -25,13 +25,9 @@ generated files are committed.
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from drake_skill.station import limits  # noqa: E402  (numpy only)
-
-MODELS = Path(__file__).resolve().parent.parent / "models"
+from drake_skill.resources import models_dir
+from drake_skill.station import limits  # numpy only
 
 PI = math.pi
 
@@ -456,10 +452,11 @@ def main() -> None:
         "package.xml": PACKAGE_XML,
     }
     files.update(MESHES)
-    (MODELS / "meshes").mkdir(parents=True, exist_ok=True)
+    models = models_dir()  # the checkout's models/ in an editable install
+    (models / "meshes").mkdir(parents=True, exist_ok=True)
     for name, text in files.items():
-        (MODELS / name).write_text(text)
-        print(f"wrote {MODELS / name}")
+        (models / name).write_text(text)
+        print(f"wrote {models / name}")
 
 
 if __name__ == "__main__":

@@ -53,11 +53,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from drake_skill.perception import pcae  # noqa: E402
-from drake_skill.perception import shapes  # noqa: E402
-from drake_skill.fileio import atomic_write_bytes, atomic_write_json  # noqa: E402
+from drake_skill.perception import pcae
+from drake_skill.perception import shapes
+from drake_skill.fileio import atomic_write_bytes, atomic_write_json
 
 
 def parse_args(argv=None) -> argparse.Namespace:

@@ -100,7 +100,11 @@ def time_encoding(n_frames: int = 50) -> tuple[float | None, str | None]:
         return None, f"drake_skill.perception.pcae not importable: {e}"
     if not hasattr(pcae, "time_encode"):
         return None, "drake_skill.perception.pcae has no time_encode()"
-    note = None if pcae.DEFAULT_WEIGHTS.is_file() else "shipped weights missing: timed random weights"
+    try:
+        shipped = pcae.default_weights().is_file()
+    except FileNotFoundError:  # the models package is not installed
+        shipped = False
+    note = None if shipped else "shipped weights missing: timed random weights"
     return float(pcae.time_encode(n_frames=n_frames)), note
 
 

@@ -66,8 +66,15 @@ NORMALIZATION_SCALE_M = 0.25
 MAX_COORDINATE_M = 1000.0
 """Largest accepted point coordinate (m): beyond it float32 arithmetic may overflow."""
 
-DEFAULT_WEIGHTS = Path(__file__).resolve().parents[2] / "models" / "pcae.safetensors"
-"""The shipped weights, trained by ``tools/train_pcae.py`` (card: ``models/pcae.json``)."""
+DEFAULT_WEIGHTS_FILE = "pcae.safetensors"
+"""The shipped weights' file in the models package (card: ``pcae.json``)."""
+
+
+def default_weights() -> Path:
+    """The shipped weights, trained by ``tools/train_pcae.py``: ``pcae.safetensors`` of ``drake_skill.models``."""
+    from drake_skill.resources import model_path
+
+    return model_path(DEFAULT_WEIGHTS_FILE)
 
 
 # --------------------------------------------------------------------------- input
@@ -361,8 +368,8 @@ def save_pcae(model: PointCloudAutoencoder, path: str | os.PathLike, metadata: d
     return atomic_write_bytes(path, save(tensors, metadata=meta))
 
 
-def load_pcae(path: str | os.PathLike = DEFAULT_WEIGHTS) -> PointCloudAutoencoder:
-    """Loads a PCAE from a safetensors file and returns it in eval mode.
+def load_pcae(path: str | os.PathLike | None = None) -> PointCloudAutoencoder:
+    """Loads a PCAE from a safetensors file (None: the shipped weights) and returns it in eval mode.
 
     Raises FileNotFoundError if ``path`` does not exist, ValueError naming the
     file if it is not a safetensors file, its header describes another
@@ -374,7 +381,7 @@ def load_pcae(path: str | os.PathLike = DEFAULT_WEIGHTS) -> PointCloudAutoencode
     """
     from safetensors import safe_open
 
-    path = Path(path)
+    path = default_weights() if path is None else Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: PCAE weights file not found (train one with tools/train_pcae.py)")
     try:
@@ -429,8 +436,11 @@ def time_encode(n_frames: int = 50, weights: str | os.PathLike | None = None, se
     """
     if n_frames < 1:
         raise ValueError(f"n_frames: expected >= 1, got {n_frames}")
-    path = Path(weights) if weights is not None else DEFAULT_WEIGHTS
-    if path.is_file():
+    try:
+        path = Path(weights) if weights is not None else default_weights()
+    except FileNotFoundError:  # the models package is not installed: time random weights
+        path = None
+    if path is not None and path.is_file():
         model = load_pcae(path)
     else:
         torch.manual_seed(seed)

@@ -136,7 +136,7 @@ from pydrake.perception import PointCloud
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
 from drake_skill.perception.features import GoalFeatures
-from drake_skill.perception.pcae import (CODE_SIZE, DEFAULT_WEIGHTS, N_POINTS, PointCloudAutoencoder, check_points,
+from drake_skill.perception.pcae import (CODE_SIZE, N_POINTS, PointCloudAutoencoder, check_points,
                                          cloud_in_object_frame, load_pcae)
 from drake_skill.perception.segmentation import (
     BOUNDING_BOX_SIZE,
@@ -472,7 +472,7 @@ class PcaeFeaturizer(LeafSystem):
         if n_goal < 1:
             raise ValueError(f"config.n_goal: expected >= 1, got {config.n_goal}")
         if model is None:
-            model = load_pcae(Path(config.weights) if config.weights else DEFAULT_WEIGHTS)
+            model = load_pcae(Path(config.weights) if config.weights else None)
         model.eval()
         # Construction-time constants (never per-run data).
         self._config = config

@@ -68,7 +68,7 @@ from pydrake.systems.sensors import PixelType, RgbdSensor
 from pydrake.common.value import AbstractValue, Value
 
 from drake_skill.station.controller import X_FLANGE_HAND, X_HAND_TCP, EndEffectorController, make_finger_limiter
-from drake_skill.station.models import add_package_paths, model_url
+from drake_skill.station.models import add_package_paths, add_panda_illustration, model_url
 from drake_skill.station.config import StationConfig, validate_station_config
 from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor
 
@@ -150,6 +150,7 @@ def add_scene_plant(builder: DiagramBuilder, config: StationConfig) -> ScenePlan
     add_package_paths(parser.package_map())
     ProcessModelDirectives(ModelDirectives(directives=config.directives), plant, parser)
     arm, hand = plant.GetModelInstanceByName("panda"), plant.GetModelInstanceByName("panda_hand")
+    add_panda_illustration(plant, scene_graph, (arm, hand))  # Meshcat only: Franka's meshes
     obj = plant.GetModelInstanceByName(config.object.model)
     object_base, object_joint = object_parts(plant, obj, config)
     plant.set_gravity_enabled(obj, bool(config.object.gravity))
