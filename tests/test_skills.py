@@ -32,7 +32,7 @@ def _write(tmp_path, name="push", scenario="drawer", joint="drawer_slide", rule=
 
 
 def test_the_shipped_skills_are_data_files():
-    assert shipped_skill_names() == ["close", "draw", "open"]
+    assert shipped_skill_names() == ["close", "draw", "open", "slide"]
     opened, closed, drawn = load_skill("open"), load_skill("close"), load_skill("draw")
     # Thesis 6.2 and Table 6.1; docs/method.md section 5 for the exploration scales.
     assert [(s.demonstrations, s.dmp_bases, s.exploration_scale) for s in (opened, closed, drawn)] == [
@@ -110,7 +110,7 @@ def test_keyframes_beyond_the_reach_name_the_distance(tmp_path):
 def test_skills_command_lists_the_shipped_skills_and_checks_a_file(tmp_path):
     listing = subprocess.run([sys.executable, "-m", "drake_skill.cli.main", "skills"], capture_output=True,
                              text=True, check=True).stdout
-    assert [line.split()[0] for line in listing.splitlines()[1:4]] == ["close", "draw", "open"]
+    assert [line.split()[0] for line in listing.splitlines()[1:5]] == ["close", "draw", "open", "slide"]
     assert re.search(r"open\s+box_closed\s+3\s+20\s+0.1\s+lid_hinge >= 1.7 after 1 s\s+16", listing)
     bad = subprocess.run([sys.executable, "-m", "drake_skill.cli.main", "skills",
                           str(_write(tmp_path, joint="lid_hinge"))], capture_output=True, text=True)

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Checks the station's physics (issue 10) and prints one summary.
 
-    python tools/check_physics.py [--json] [--seeds 10] [--reflex] [--skills open,close,draw]
+    python tools/check_physics.py [--json] [--seeds 10] [--reflex] [--skills open,close,draw,slide]
 
 For each skill: the scripted motion on ``--seeds`` object poses at the
 scenario's plant step and at a 1 ms reference step (verdict of the
@@ -92,7 +92,7 @@ def main(argv=None) -> int:
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--reflex", action="store_true")
-    parser.add_argument("--skills", default="open,close,draw")
+    parser.add_argument("--skills", default=None, help="comma-separated skills (default: every shipped skill with keyframes)")
     args = parser.parse_args(argv)
     logging.getLogger("drake").setLevel(logging.ERROR)
 
@@ -104,6 +104,9 @@ def main(argv=None) -> int:
               "reflex_enabled": bool(args.reflex or config.reflex.enabled),
               "lid_falls_shut": bool(check_lid(-4.0) < 0.02), "lid_falls_open": bool(check_lid(4.0) > 1.85),
               "skills": {}}
+    if args.skills is None:
+        from drake_skill.skills import shipped_skills
+        args.skills = ",".join(spec.name for spec in shipped_skills() if spec.keyframes)
     for skill in args.skills.split(","):
         step_s, report["skills"][skill] = check_skill(skill, args.seeds, args.reflex)
         if not args.json:
