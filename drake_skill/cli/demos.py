@@ -217,7 +217,7 @@ def list_table(rows) -> str:
 def list_demos(args) -> int:
     import sys
 
-    from drake_skill.demos.format import (DemonstrationError, _check_manifest, existing_demo_files,
+    from drake_skill.demos.format import (DemonstrationError, check_manifest, existing_demo_files,
                                           load_demonstration)
 
     errors.input_folder(args.dir, "DIR", "demonstrations (demo_NNN.npz)")
@@ -234,7 +234,7 @@ def list_demos(args) -> int:
     print(list_table(rows))
     problems = [r for r in rows if isinstance(r[2], str)]
     try:
-        _check_manifest(Path(args.dir), paths)
+        check_manifest(Path(args.dir), paths)
     except DemonstrationError as e:
         problems.append(e)
         print(f"drake-skill: warning: {e}", file=sys.stderr)

@@ -85,6 +85,7 @@ __all__ = [
     "existing_demo_files",
     "save_demonstrations",
     "append_demonstration",
+    "check_manifest",
     "MANIFEST",
 ]
 
@@ -429,7 +430,7 @@ def load_demonstrations(directory, skill: str | None = None) -> list[Demonstrati
     if not paths:
         raise FileNotFoundError(f"{directory}: no demo_*.npz files (record some with "
                                 f"'drake-skill demos record --out {directory}')")
-    _check_manifest(directory, paths)
+    check_manifest(directory, paths)
     demos = [load_demonstration(p) for p in paths]
     if skill is not None:
         for p, d in zip(paths, demos):
@@ -445,7 +446,7 @@ def existing_demo_files(directory) -> list[Path]:
 
 
 # ---------------------------------------------------------------- sets of files
-def _check_manifest(directory: Path, paths: list[Path]) -> None:
+def check_manifest(directory: Path, paths: list[Path]) -> None:
     """With a ``demos.json`` (written by :func:`save_demonstrations`), the folder must hold exactly its files."""
     from drake_skill.fileio import file_sha256
 
@@ -535,7 +536,7 @@ def append_demonstration(demo: Demonstration, directory, extra=None) -> Path:
         raise NotADirectoryError(f"{directory}: exists and is not a folder; choose a folder for the demonstrations")
     existing = existing_demo_files(directory)
     if existing:
-        _check_manifest(directory, existing)
+        check_manifest(directory, existing)
         for p in existing:
             other = load_demonstration(p)
             if other.skill != demo.skill:
