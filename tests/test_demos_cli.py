@@ -105,8 +105,8 @@ def test_list_prints_a_row_per_demonstration(demo_dir, capsys):
 def test_replay_writes_a_meshcat_page_per_demonstration(tmp_path):
     out = tmp_path / "open"
     save_demonstrations([make_demo(0, perception=False), make_demo(1, perception=False)], out)
-    assert main(["demos", "replay", str(out), "--out", str(tmp_path / "html")]) == 0
-    pages = sorted((tmp_path / "html").iterdir())
+    assert main(["demos", "replay", str(out)]) == 0
+    pages = sorted((tmp_path / "open_replay").iterdir())            # beside the folder by default
     assert [p.name for p in pages] == ["demo_000.html", "demo_001.html"]
     animations = []
     for page in pages:

@@ -17,7 +17,8 @@ list: a table of a folder's demonstrations (index, file, skill, duration,
 samples, ground-truth success, source).
 
 replay: one standalone Meshcat HTML page per demonstration (``--out``,
-default ``DIR/replay``): the recorded joint positions played back on the
+default ``DIR_replay`` beside DIR, so that re-recording DIR leaves no stale
+pages in it): the recorded joint positions played back on the
 skill's scenario plant; open it in a browser.
 
 export / import: a robomimic dataset (one HDF5 file, ``data/demo_N/obs``,
@@ -87,7 +88,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     ls.add_argument("dir", type=Path, metavar="DIR", help="a demonstration folder (demo_NNN.npz)")
     rp = action("replay", "a standalone Meshcat HTML replay per demonstration", replay)
     rp.add_argument("dir", type=Path, metavar="DIR", help="a demonstration folder (demo_NNN.npz)")
-    rp.add_argument("--out", type=Path, default=None, help="folder for demo_NNN.html (default DIR/replay)")
+    rp.add_argument("--out", type=Path, default=None, help="folder for demo_NNN.html (default DIR_replay, beside DIR)")
     rp.add_argument("--scenario", type=Path,
                     help="station scenario YAML (keys left out keep the skill's shipped scenario)")
     ex = action("export", "write a folder's demonstrations as one dataset file", export)
@@ -253,7 +254,8 @@ def replay(args) -> int:
 
     errors.input_folder(args.dir, "DIR", "demonstrations (demo_NNN.npz)")
     demos = load_demonstrations(args.dir)
-    out = args.out if args.out is not None else args.dir / "replay"
+    folder = args.dir.resolve()
+    out = args.out if args.out is not None else folder.with_name(f"{folder.name}_replay")
     errors.output_folder(out, "--out", what="the replays")
     configs = {}
     for d in demos:
