@@ -323,3 +323,77 @@ def test_interrupted_record_force_leaves_old_or_new(tmp_path, monkeypatch):
         if not state["fired"]:
             break
     assert not state["fired"] and outcomes[-1] and not outcomes[0] and len(outcomes) >= 5
+
+
+def test_append_adds_the_next_file_and_updates_the_manifest(tmp_path):
+    """``hardware record-demo``'s write: the folder still loads as one set afterwards."""
+    from drake_skill.demos.format import MANIFEST, append_demonstration, save_demonstrations
+
+    out = tmp_path / "open"
+    save_demonstrations([make_demo(0), make_demo(1)], out, extra=lambda tmp: (tmp / "demos.png").write_bytes(b"x"))
+    (out / "notes.txt").write_text("kept")
+    path = append_demonstration(make_demo(7, perception=False), out)
+    assert path == out / "demo_002.npz"
+    assert sorted(json.loads((out / MANIFEST).read_text())["files"]) == ["demo_000.npz", "demo_001.npz",
+                                                                         "demo_002.npz"]
+    assert [d.seed for d in load_demonstrations(out, skill="open")] == [0, 1, 7]
+    assert (out / "notes.txt").read_text() == "kept" and not (out / "demos.png").exists()   # stale plot dropped
+    # Into a new folder, and into one assembled by hand (no manifest): both load afterwards.
+    assert append_demonstration(make_demo(3), tmp_path / "new") == tmp_path / "new" / "demo_000.npz"
+    assert [d.seed for d in load_demonstrations(tmp_path / "new")] == [3]
+    by_hand = tmp_path / "by_hand"
+    save_demonstration(make_demo(4), by_hand / "demo_000.npz")
+    save_demonstration(make_demo(5), by_hand / "demo_003.npz")
+    assert append_demonstration(make_demo(6), by_hand).name == "demo_004.npz"   # after the highest index
+    assert [d.seed for d in load_demonstrations(by_hand)] == [4, 5, 6]
+    # A folder that does not load as a set, or holds another skill, is refused untouched.
+    with pytest.raises(DemonstrationError, match=r"demo_000\.npz: field 'skill' is 'open', but the demonstration "
+                                                 r"to add is 'close'; record it into a folder of its own skill"):
+        append_demonstration(make_demo(8, skill="close"), out)
+    save_demonstration(make_demo(9), out / "demo_005.npz")
+    with pytest.raises(DemonstrationError, match=r"do not match demos\.json .*not listed \['demo_005\.npz'\]"):
+        append_demonstration(make_demo(10), out)
+    assert not (out / "demo_006.npz").exists()
+
+
+def test_interrupted_append_leaves_old_or_new(tmp_path, monkeypatch):
+    """An interruption at every file-system step of append_demonstration leaves a loadable
+    folder with the old set or the new one."""
+    import shutil
+
+    from drake_skill import fileio
+    from drake_skill.demos.format import append_demonstration, save_demonstrations
+
+    class Interrupted(BaseException):
+        pass
+
+    reference = tmp_path / "reference"
+    save_demonstrations([make_demo(0, perception=False), make_demo(1, perception=False)], reference)
+    steps = ("atomic_write_bytes", "_fsync_tree", "_swap_in", "_remove_tree", "carry_over")
+    outcomes = []
+    for at in range(1, 30):
+        target = tmp_path / f"case{at}"
+        shutil.copytree(reference, target)
+        state = {"n": 0, "fired": False}
+        with monkeypatch.context() as m:
+            for name in steps:
+                real = getattr(fileio, name)
+
+                def step(*args, _real=real, **kwargs):
+                    if not state["fired"]:
+                        state["n"] += 1
+                        if state["n"] == at:
+                            state["fired"] = True
+                            raise Interrupted()
+                    return _real(*args, **kwargs)
+                m.setattr(fileio, name, step)
+            try:
+                append_demonstration(make_demo(2, perception=False), target)
+            except Interrupted:
+                pass
+        seeds = [d.seed for d in load_demonstrations(target)]
+        assert seeds in ([0, 1], [0, 1, 2]), f"step {at}: {seeds}"
+        outcomes.append(seeds == [0, 1, 2])
+        if not state["fired"]:
+            break
+    assert not state["fired"] and outcomes[-1] and not outcomes[0] and len(outcomes) >= 4

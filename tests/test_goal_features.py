@@ -39,15 +39,62 @@ def test_fit_transform_shapes_and_variance():
     np.testing.assert_allclose(gf.inverse_transform(g), x, atol=0.1)
 
 
-def test_matches_scikit_learn_up_to_sign():
+def _numpy_pca(x, k):
+    """The hand-written PCA GoalFeatures used before scikit-learn (thin SVD, largest entry positive)."""
+    mean = x.mean(axis=0)
+    _, s, vt = np.linalg.svd(x - mean, full_matrices=False)
+    comps = vt[:k]
+    signs = np.sign(comps[np.arange(k), np.argmax(np.abs(comps), axis=1)])
+    signs[signs == 0] = 1.0
+    var_all = s**2 / (x.shape[0] - 1)
+    return mean, comps * signs[:, None], var_all[:k], var_all[:k] / var_all.sum()
+
+
+#: How far the scikit-learn fit may be from the hand-written one: both are the same
+#: thin SVD (LAPACK via scipy vs numpy), so only rounding separates them.
+PCA_TOLERANCE = 1e-9
+
+
+@pytest.mark.parametrize("seed, t, rank", [(3, 60, 12), (4, 120, 30)])
+def test_same_goal_data_as_the_hand_written_pca(seed, t, rank):
+    x = _codes(seed=seed, t=t, rank=rank)
+    gf = GoalFeatures(8).fit(x)
+    mean, comps, var, ratio = _numpy_pca(x, 8)
+    np.testing.assert_allclose(gf.mean_, mean, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(gf.components_, comps, rtol=0, atol=PCA_TOLERANCE)
+    np.testing.assert_allclose(gf.explained_variance_, var, rtol=PCA_TOLERANCE)
+    np.testing.assert_allclose(gf.explained_variance_ratio_, ratio, rtol=PCA_TOLERANCE)
+    # The goal data, signs included (scikit-learn's own svd_flip signs are not used).
+    g_old = (x - mean) @ comps.T
+    np.testing.assert_allclose(gf.transform(x), g_old, rtol=0, atol=PCA_TOLERANCE * np.abs(g_old).max())
+
+
+def test_sign_convention_is_fixed_whatever_scikit_learns_signs():
     from sklearn.decomposition import PCA
+
+    from drake_skill.perception.features import largest_entry_signs
 
     x = _codes(seed=3, rank=12)
     gf = GoalFeatures(8).fit(x)
-    sk = PCA(8).fit(x)
-    np.testing.assert_allclose(gf.explained_variance_, sk.explained_variance_, rtol=1e-8)
-    np.testing.assert_allclose(gf.explained_variance_ratio_, sk.explained_variance_ratio_, rtol=1e-8)
-    np.testing.assert_allclose(np.abs(gf.transform(x)), np.abs(sk.transform(x)), atol=1e-8)
+    sk = PCA(8, svd_solver="full").fit(x)
+    np.testing.assert_allclose(np.abs(gf.components_), np.abs(sk.components_), atol=1e-12)
+    assert np.all(gf.components_[np.arange(8), np.argmax(np.abs(gf.components_), axis=1)] > 0)
+    # scikit-learn 1.3-1.4 flipped by U's columns (other signs); any signs come out the same.
+    flips = np.array([1, -1, 1, -1, -1, 1, 1, -1], dtype=float)
+    arbitrary = sk.components_ * flips[:, None]
+    np.testing.assert_array_equal(arbitrary * largest_entry_signs(arbitrary)[:, None],
+                                  sk.components_ * largest_entry_signs(sk.components_)[:, None])
+    np.testing.assert_array_equal(largest_entry_signs(np.zeros((2, 4))), [1.0, 1.0])
+
+
+def test_skill_arrays_written_by_the_hand_written_pca_still_load():
+    x = _codes(seed=5)
+    mean, comps, var, ratio = _numpy_pca(x, 8)
+    # What skills saved before the switch hold in arrays.npz (goal_features_* keys).
+    old = {"mean": mean, "components": comps, "explained_variance": var,
+           "explained_variance_ratio": ratio, "n_samples": np.array(60, dtype=np.int64)}
+    loaded = GoalFeatures.from_arrays(old)
+    np.testing.assert_array_equal(loaded.transform(x), (x - mean) @ comps.T)
 
 
 def test_list_of_demonstrations_and_sign_convention():

@@ -330,3 +330,51 @@ def test_from_arrays_validates_like_a_fit(fitted4):
             GoalHMM.from_arrays(broken(**changes), meta, prefix="")
     with pytest.raises(ValueError, match=r"metadata 'n_states' = 99 disagrees"):
         GoalHMM.from_arrays(arrays, {**meta, "n_states": 99})
+
+
+# ----------------------------------------------------------- hmmlearn API used
+def test_compiled_forward_backward_is_hmmlearns_and_equals_plain_numpy():
+    """goal_model keeps hmmlearn's private compiled recursions (filtered posteriors
+    need the forward lattice, which the public API does not return): pinned here
+    against the plain numpy recursion on a small model."""
+    import drake_skill.reward.goal_model as gm_module
+
+    assert gm_module._hmmc is not None, "hmmlearn's compiled _hmmc.forward_log/backward_log are gone"
+    rng = np.random.default_rng(7)
+    k, T = 4, 30
+    P = rng.dirichlet(np.ones(k), size=k)
+    P[0, 2] = 0.0                      # a forbidden transition (log 0 = -inf)
+    P /= P.sum(axis=1, keepdims=True)
+    pi = rng.dirichlet(np.ones(k))
+    log_b = rng.normal(scale=30.0, size=(T, k))
+    la, lb = gm_module._lattices(log_b, pi, P, smooth=True)
+    with np.errstate(divide="ignore"):
+        log_pi, log_P = np.log(pi), np.log(P)
+    np.testing.assert_allclose(la, gm_module._forward_log_np(log_b, log_pi, log_P), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(lb, gm_module._backward_log_np(log_b, log_P), rtol=1e-12, atol=1e-9)
+
+
+def test_posteriors_equal_hmmlearns_public_score_samples(fitted4):
+    model, X, lengths, gm = fitted4
+    G, _ = sample_demonstrations(model, [40], seed=5, reach_end=False)
+    log_prob, posteriors = _reference(gm).score_samples(G)
+    _, smoothed, log_lik = forward_backward(gm.log_emission(G), gm.startprob_, gm.transmat_)
+    np.testing.assert_allclose(smoothed, posteriors, atol=1e-10)
+    assert log_lik == pytest.approx(log_prob, rel=1e-10)
+
+
+@pytest.mark.parametrize("ct", ["spherical", "diag", "full", "tied"])
+def test_full_covariances_from_the_public_property(ct):
+    """_full_covars reads hmmlearn's public covars_ (with the spherical shape fix): the
+    same matrices, bit for bit, as built by hand from the private _covars_."""
+    from drake_skill.reward.goal_model import _full_covars
+
+    rng = np.random.default_rng(1)
+    X = rng.normal(size=(80, 3)) + np.repeat(np.eye(3)[:2] * 4, 40, axis=0)
+    m = GaussianHMM(2, covariance_type=ct, n_iter=5, random_state=0).fit(X)
+    c, eye = np.asarray(m._covars_, dtype=float), np.eye(3)
+    by_hand = {"spherical": lambda: np.ravel(c).reshape(2, -1).mean(axis=1)[:, None, None] * eye,
+               "diag": lambda: c[:, :, None] * eye,
+               "tied": lambda: np.broadcast_to(c, (2, 3, 3)),
+               "full": lambda: c}[ct]()
+    np.testing.assert_array_equal(_full_covars(m), by_hand)

@@ -534,5 +534,8 @@ def test_hardware_cli_against_sim_robot_in_another_process(tmp_path, tmp_path_fa
     assert counts and int(counts[1]) > 100 and int(counts[2]) <= 0.01 * int(counts[1]), logs["robot_run.txt"]
     demo = load_demonstration(tmp_path / "demos" / "demo_000.npz")
     assert demo.metadata["source"] == "kinesthetic" and demo.has_perception
+    # The manifest was written with it: the folder loads as a set (it used to "mix recordings").
+    from drake_skill.demos.format import load_demonstrations
+    assert [d.seed for d in load_demonstrations(tmp_path / "demos", skill="close")] == [7]
     travel = np.sum(np.linalg.norm(np.diff(demo.X_OE_100hz[:, :3], axis=0), axis=1))
     assert travel > 0.05, f"the guided hand moved {travel:.3f} m"

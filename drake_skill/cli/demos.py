@@ -1,22 +1,38 @@
-"""``drake-skill demos record``: record demonstrations of a skill into a folder.
+"""``drake-skill demos``: record, list, replay, export and import demonstrations.
 
-Scripted (default): the human-like scripted demonstrator plays the skill in
-the simulated station (``drake_skill.demos.demonstrator``); a variation that fails
-the ground-truth judge is replaced by the next seed. Interactive
-(``--interactive``): Meshcat opens, you drive the hand with sliders, keys or
-a gamepad and press Record / Stop (``drake_skill.demos.teleop``).
-
-Writes ``OUT/demo_000.npz``, ``demo_001.npz``, ... (format:
+record: the scripted demonstrator (default) or you (``--interactive``)
+demonstrate a skill in the simulated station. Scripted: the human-like
+scripted demonstrator plays the skill (``drake_skill.demos.demonstrator``);
+a variation that fails the ground-truth judge is replaced by the next seed.
+Interactive: Meshcat opens, you drive the hand with sliders, keys or a
+gamepad and press Record / Stop (``drake_skill.demos.teleop``). Writes
+``OUT/demo_000.npz``, ``demo_001.npz``, ... (format:
 ``drake_skill.demos.format``), ``OUT/demos.json`` (the list of the set) and
 ``OUT/demos.png`` (the demonstrated hand paths in the object frame and the
 object state over time), then prints a table. Existing demo files are never
 replaced without ``--force``; with it the whole set is replaced at once
 (an interruption leaves the old set or the new one, never a mix).
 
+list: a table of a folder's demonstrations (index, file, skill, duration,
+samples, ground-truth success, source).
+
+replay: one standalone Meshcat HTML page per demonstration (``--out``,
+default ``DIR_replay`` beside DIR, so that re-recording DIR leaves no stale
+pages in it): the recorded joint positions played back on the
+skill's scenario plant; open it in a browser.
+
+export / import: a robomimic dataset (one HDF5 file, ``data/demo_N/obs``,
+``actions``, ...; see ``drake_skill.demos.robomimic``) from a folder, and a
+folder (with ``demos.json``) from such a file, the arrays bit for bit.
+
 examples:
   drake-skill demos record --skill open --out demos/open
   drake-skill demos record --skill close --count 2 --seed 10 --out demos/close
   drake-skill demos record --skill draw --interactive --out demos/draw_by_hand
+  drake-skill demos list demos/open
+  drake-skill demos replay demos/open --out replays/
+  drake-skill demos export --format robomimic demos/open open.hdf5
+  drake-skill demos import open.hdf5 demos/open_again
 """
 
 import argparse
@@ -28,8 +44,10 @@ import numpy as np
 from drake_skill.cli import errors
 from drake_skill.fileio import write_figure_png
 
+FORMATS = ("robomimic",)   # drake_skill.demos.robomimic.FORMATS (not imported here: --help stays light)
+
 NAME = "demos"
-HELP = "record demonstrations: demos record --skill open --count 3 --out DIR"
+HELP = "demonstrations: record, list, replay (Meshcat HTML), export / import (robomimic HDF5)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -58,6 +76,31 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="replace the demonstrations already in --out (the whole set at once)")
     rec.add_argument("--quiet", action="store_true", help="no progress bar")
     rec.set_defaults(_action=record)
+
+    def action(name, help, func):
+        p = sub.add_parser(name, help=help, description=help)
+        p.add_argument("--verbose", action="store_true", default=argparse.SUPPRESS,
+                       help="print tracebacks of errors")
+        p.set_defaults(_action=func)
+        return p
+
+    ls = action("list", "a table of a folder's demonstrations", list_demos)
+    ls.add_argument("dir", type=Path, metavar="DIR", help="a demonstration folder (demo_NNN.npz)")
+    rp = action("replay", "a standalone Meshcat HTML replay per demonstration", replay)
+    rp.add_argument("dir", type=Path, metavar="DIR", help="a demonstration folder (demo_NNN.npz)")
+    rp.add_argument("--out", type=Path, default=None, help="folder for demo_NNN.html (default DIR_replay, beside DIR)")
+    rp.add_argument("--scenario", type=Path,
+                    help="station scenario YAML (keys left out keep the skill's shipped scenario)")
+    ex = action("export", "write a folder's demonstrations as one dataset file", export)
+    ex.add_argument("--format", choices=FORMATS, default="robomimic", help="dataset layout (default robomimic)")
+    ex.add_argument("dir", type=Path, metavar="DIR", help="a demonstration folder (demo_NNN.npz)")
+    ex.add_argument("out", type=Path, metavar="OUT.hdf5", help="the file to write")
+    ex.add_argument("--force", action="store_true", help="replace OUT.hdf5 if it exists")
+    im = action("import", "a demonstration folder from a dataset file written by export", import_)
+    im.add_argument("--format", choices=FORMATS, default="robomimic", help="dataset layout (default robomimic)")
+    im.add_argument("file", type=Path, metavar="IN.hdf5", help="a dataset written by 'demos export'")
+    im.add_argument("dir", type=Path, metavar="DIR", help="the folder for demo_NNN.npz and demos.json")
+    im.add_argument("--force", action="store_true", help="replace the demonstrations already in DIR")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -153,6 +196,107 @@ def record(args) -> int:
     print(table([(p.name, d) for p, d in zip(paths, demos)]))
     print(f"wrote {len(demos)} demonstration(s) to {args.out}/ and {args.out / 'demos.png'}")
     return 0 if all(d.success for d in demos) else 1
+
+
+def list_table(rows) -> str:
+    """The ``demos list`` table; rows are (index, file name, Demonstration or error message)."""
+    lines = [f"{'#':>3}  {'file':<14}{'skill':<7}{'duration s':>11}{'samples 100/10 Hz':>19}"
+             f"{'perception':>12}{'success':>9}  source"]
+    for i, name, d in rows:
+        if isinstance(d, str):
+            lines.append(f"{i:>3}  {name:<14}unreadable: {d}")
+            continue
+        perception = f"{int(d.perception_valid.sum())}/{d.n_samples}" if d.has_perception else "-"
+        success = "yes" if d.success else "NO"
+        if "verdict" in d.metadata:
+            success += f" ({d.metadata['verdict']})"
+        lines.append(f"{i:>3}  {name:<14}{d.skill:<7}{d.duration:>11.2f}{d.times_100hz.size:>11} / {d.n_samples:<5}"
+                     f"{perception:>12}{success:>9}  {d.metadata.get('source', '-')}")
+    return "\n".join(lines)
+
+
+def list_demos(args) -> int:
+    import sys
+
+    from drake_skill.demos.format import (DemonstrationError, check_manifest, existing_demo_files,
+                                          load_demonstration)
+
+    errors.input_folder(args.dir, "DIR", "demonstrations (demo_NNN.npz)")
+    paths = existing_demo_files(args.dir)
+    if not paths:
+        raise FileNotFoundError(f"{args.dir}: no demo_*.npz files (record some with "
+                                f"'drake-skill demos record --out {args.dir}')")
+    rows = []
+    for i, p in enumerate(paths):
+        try:
+            rows.append((i, p.name, load_demonstration(p)))
+        except (ValueError, OSError) as e:
+            rows.append((i, p.name, str(e).replace(f"{p}: ", "")))
+    print(list_table(rows))
+    problems = [r for r in rows if isinstance(r[2], str)]
+    try:
+        check_manifest(Path(args.dir), paths)
+    except DemonstrationError as e:
+        problems.append(e)
+        print(f"drake-skill: warning: {e}", file=sys.stderr)
+    skills = sorted({d.skill for _, _, d in rows if not isinstance(d, str)})
+    if len(skills) > 1:
+        problems.append(skills)
+        print(f"drake-skill: warning: {args.dir} mixes skills ({', '.join(skills)})", file=sys.stderr)
+    print(f"{len(paths)} demonstration(s) in {args.dir}" + ("" if not problems else "; the folder does not load "
+                                                           "as one set (see above)"))
+    return 1 if problems else 0
+
+
+def replay(args) -> int:
+    from drake_skill.demos.format import load_demonstrations
+    from drake_skill.demos.replay import write_replay
+
+    errors.input_folder(args.dir, "DIR", "demonstrations (demo_NNN.npz)")
+    demos = load_demonstrations(args.dir)
+    folder = args.dir.resolve()
+    out = args.out if args.out is not None else folder.with_name(f"{folder.name}_replay")
+    errors.output_folder(out, "--out", what="the replays")
+    configs = {}
+    for d in demos:
+        if d.skill not in configs:
+            configs[d.skill] = errors.station_config(d.skill, args.scenario)
+    from pydrake.geometry import Meshcat
+    meshcat = Meshcat()
+    written = [write_replay(d, out / Path(d.path).with_suffix(".html").name, configs[d.skill], meshcat)
+               for d in demos]
+    for p, d in zip(written, demos):
+        print(f"wrote {p} ({d.skill}, {d.duration:.1f} s)")
+    return 0
+
+
+def export(args) -> int:
+    from drake_skill.demos.robomimic import export_robomimic
+
+    errors.input_folder(args.dir, "DIR", "demonstrations (demo_NNN.npz)")
+    if args.out.exists() and not args.force:
+        raise FileExistsError(f"OUT.hdf5 {args.out}: exists; pass --force to replace it or choose another file")
+    if args.out.exists() and not args.out.is_file():
+        raise ValueError(f"OUT.hdf5 {args.out}: is not a regular file; give the path of the .hdf5 file to write")
+    path, demos = export_robomimic(args.dir, args.out)
+    print(list_table([(i, f"demo_{i}", d) for i, d in enumerate(demos)]))
+    print(f"wrote {path}: {len(demos)} demonstration(s), {sum(d.n_samples for d in demos)} samples "
+          f"(robomimic layout, data/demo_N)")
+    return 0
+
+
+def import_(args) -> int:
+    from drake_skill.demos.format import existing_demo_files
+    from drake_skill.demos.robomimic import import_robomimic
+
+    errors.input_file(args.file, "IN.hdf5", "a dataset written by 'drake-skill demos export'")
+    existing = existing_demo_files(args.dir)
+    errors.output_folder(args.dir, "DIR", occupied=bool(existing), force=args.force,
+                         what=f"{len(existing)} demonstration file(s)" if existing else "the demonstrations")
+    paths, demos = import_robomimic(args.file, args.dir, force=args.force)
+    print(list_table([(i, p.name, d) for i, (p, d) in enumerate(zip(paths, demos))]))
+    print(f"wrote {len(paths)} demonstration(s) to {args.dir}/")
+    return 0
 
 
 def main(argv=None) -> int:

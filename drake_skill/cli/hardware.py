@@ -26,8 +26,9 @@ record-demo: records a kinesthetic demonstration: run the driver in a
 compliant mode (``--control_mode=torque``: with no command it holds the arm
 in gravity compensation and light damping; nothing is commanded from here),
 guide the arm by hand for ``--duration`` seconds; the measured hand pose at
-100 Hz and the segmented camera cloud at 10 Hz are written as the next
-``demo_NNN.npz`` of ``--out``. The demonstration format needs the object's
+100 Hz and the segmented camera cloud at 10 Hz are added to ``--out`` as its
+next ``demo_NNN.npz``, with the folder's ``demos.json`` updated in the same
+atomic swap (the folder then loads as one set). The demonstration format needs the object's
 state over time (lid angle / drawer travel): it is read from
 SIM_OBJECT_STATE (lcmt_scope), which sim-robot publishes; on a real robot a
 sensor on the hinge or slide must publish it there.
@@ -147,9 +148,10 @@ def _record_demo(args) -> int:
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
 
+    from drake_skill.cli import errors
     from drake_skill.cli.sim_robot import load_config
     from drake_skill.demos.demonstrator import demonstration_from
-    from drake_skill.demos.format import demo_path, existing_demo_files, save_demonstration
+    from drake_skill.demos.format import append_demonstration, existing_demo_files, load_demonstrations
     from drake_skill.station.hardware import build_hardware_station
     from drake_skill.station.pose_source import PoseTrajectorySource, hold_plan
     from drake_skill.station.simulation import StationRecorder
@@ -158,6 +160,9 @@ def _record_demo(args) -> int:
         raise ValueError(f"--duration must be positive, got {args.duration}")
     if args.out.exists() and not args.out.is_dir():
         raise NotADirectoryError(f"--out {args.out}: not a folder")
+    skill_name = errors.skill(args.skill).name
+    if existing_demo_files(args.out):   # a set that does not load (mixed, other skill) is refused before recording
+        load_demonstrations(args.out, skill=skill_name)
     config = load_config(args.config, args.lcm_url, args.skill, camera=not args.no_camera)
     if not config.ground_truth_channel:
         raise ValueError("record-demo needs the object's state over time: set ground_truth_channel "
@@ -206,10 +211,8 @@ def _record_demo(args) -> int:
     success = judge_success(float(obj[-1]), config.station.success)
     metadata = {"source": "kinesthetic", "lcm_url": config.lcm_url,
                 "X_WO_note": "X_OE uses the perceived X_WO at the first frame (the placed pose without a camera)"}
-    from drake_skill.cli import errors
-    demo = demonstration_from(recorder, errors.skill(args.skill).name, args.seed, X_WO, success, metadata)
-    args.out.mkdir(parents=True, exist_ok=True)
-    path = save_demonstration(demo, demo_path(args.out, len(existing_demo_files(args.out))))
+    demo = demonstration_from(recorder, skill_name, args.seed, X_WO, success, metadata)
+    path = append_demonstration(demo, args.out)      # demos.json updated in the same swap
     print(f"wrote {path}: {demo.duration:.1f} s, final object state {demo.final_object_state:.3f}, "
           f"{'success' if success else 'failure'}")
     return 0

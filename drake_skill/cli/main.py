@@ -57,6 +57,16 @@ class Parser(argparse.ArgumentParser):
                       f"{message} (see '{self.prog} --help')"
         raise UsageError(message)
 
+    # Help texts come from docstrings written in reStructuredText; the markup is
+    # stripped from the formatted text (format_help / format_usage are public
+    # ArgumentParser methods; every subparser is a Parser, nested ones too, as
+    # add_subparsers defaults parser_class to the parent's class).
+    def format_help(self) -> str:
+        return plain(super().format_help())
+
+    def format_usage(self) -> str:
+        return plain(super().format_usage())
+
 
 def plain(text: str | None) -> str:
     """Help text without reStructuredText markup (double backticks, :role:`x` references)."""
@@ -97,28 +107,13 @@ def build_parser() -> Parser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", title="commands", parser_class=Parser)
     sub.required = True
     for module in available_commands():
-        doc = plain(getattr(module, "DESCRIPTION", None) or module.__doc__)
-        p = sub.add_parser(module.NAME, help=plain(module.HELP), description=doc,
+        doc = getattr(module, "DESCRIPTION", None) or module.__doc__
+        p = sub.add_parser(module.NAME, help=module.HELP, description=doc,
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         _add_common(p, top=False)
         module.add_arguments(p)
         p.set_defaults(_run=module.run, _parser=p)
-        _plain_parser(p)
     return parser
-
-
-def _plain_parser(parser: argparse.ArgumentParser) -> None:
-    """Strips reStructuredText markup from a parser's texts, its arguments' and its subparsers'."""
-    parser.description = plain(parser.description) or None
-    parser.epilog = plain(parser.epilog) or None
-    for action in parser._actions:
-        if isinstance(action.help, str) and action.help != argparse.SUPPRESS:
-            action.help = plain(action.help)
-        if isinstance(action, argparse._SubParsersAction):
-            for choice in action._choices_actions:
-                choice.help = plain(choice.help)
-            for sub in set(action.choices.values()):
-                _plain_parser(sub)
 
 
 def one_line(error: BaseException) -> str:

@@ -64,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError(f"--duration must be positive, got {args.duration}")
     config = load_config(args.config, args.lcm_url, args.skill, camera=not args.no_camera)
 
+    from drake_skill.cli import errors
     from drake_skill.station.sim_robot import SimRobot
 
     robot = SimRobot(config, guide=errors.skill(args.skill) if args.guide else None)

@@ -84,6 +84,8 @@ __all__ = [
     "demo_path",
     "existing_demo_files",
     "save_demonstrations",
+    "append_demonstration",
+    "check_manifest",
     "MANIFEST",
 ]
 
@@ -428,7 +430,7 @@ def load_demonstrations(directory, skill: str | None = None) -> list[Demonstrati
     if not paths:
         raise FileNotFoundError(f"{directory}: no demo_*.npz files (record some with "
                                 f"'drake-skill demos record --out {directory}')")
-    _check_manifest(directory, paths)
+    check_manifest(directory, paths)
     demos = [load_demonstration(p) for p in paths]
     if skill is not None:
         for p, d in zip(paths, demos):
@@ -444,7 +446,7 @@ def existing_demo_files(directory) -> list[Path]:
 
 
 # ---------------------------------------------------------------- sets of files
-def _check_manifest(directory: Path, paths: list[Path]) -> None:
+def check_manifest(directory: Path, paths: list[Path]) -> None:
     """With a ``demos.json`` (written by :func:`save_demonstrations`), the folder must hold exactly its files."""
     from drake_skill.fileio import file_sha256
 
@@ -509,3 +511,45 @@ def save_demonstrations(demos, directory, force: bool = False, extra=None) -> li
             extra(tmp)
         fileio.atomic_write_json(tmp / MANIFEST, {"schema": "drake-skill-demonstration-set", "files": files})
     return [demo_path(directory, i) for i in range(len(demos))]
+
+
+def append_demonstration(demo: Demonstration, directory, extra=None) -> Path:
+    """Adds ``demo`` to the set in ``directory`` as the next ``demo_NNN.npz``, manifest updated.
+
+    The folder is rewritten as one unit like :func:`save_demonstrations`: the
+    files already there are hard-linked into a new directory (no copy), the
+    new file and a ``demos.json`` listing all of them are written beside
+    them, and the new directory replaces the old in one swap. An
+    interruption leaves the old set or the new one; the folder loads with
+    :func:`load_demonstrations` either way. The index is one past the highest
+    existing one. A folder without ``demos.json`` (assembled by hand) gets one.
+    ``demos.png`` (a plot of the set written by ``demos record``) is left out
+    unless ``extra(tmp_dir)`` writes a new one; ``extra`` sees the whole new set.
+
+    Refuses (DemonstrationError) a folder whose files do not match its
+    manifest or hold another skill's demonstrations.
+    """
+    from drake_skill import fileio
+
+    directory = Path(directory)
+    if directory.exists() and not directory.is_dir():
+        raise NotADirectoryError(f"{directory}: exists and is not a folder; choose a folder for the demonstrations")
+    existing = existing_demo_files(directory)
+    if existing:
+        check_manifest(directory, existing)
+        for p in existing:
+            other = load_demonstration(p)
+            if other.skill != demo.skill:
+                _fail(str(p), "skill", f"is {other.skill!r}, but the demonstration to add is {demo.skill!r}; "
+                      "record it into a folder of its own skill (--out)")
+    index = 1 + max((int(p.stem.split("_")[1]) for p in existing if p.stem.split("_")[1].isdigit()), default=-1)
+    target = demo_path(directory, index)
+    demo.validate(str(target))
+    with fileio.staged_directory(directory, overwrite=True) as tmp:
+        fileio.carry_over(directory, tmp, exclude={MANIFEST, "demos.png"})
+        fileio.atomic_save_npz(tmp / target.name, demo.to_arrays())
+        files = {p.name: fileio.file_sha256(p) for p in existing_demo_files(tmp)}
+        if extra is not None:
+            extra(tmp)
+        fileio.atomic_write_json(tmp / MANIFEST, {"schema": "drake-skill-demonstration-set", "files": files})
+    return target

@@ -9,9 +9,17 @@ demonstrations, > 90 % explained variance reported with 8 components).
                 explained variance_i = S_i^2 / (T - 1)             (k,)
     transform:  g = (x - mu) @ components^T                        (T, k) or (k,)
 
-Plain numpy, no Drake, scikit-learn habits: hyper-parameters in the
-constructor, fitted attributes end in ``_``. Component signs are fixed
-(largest-magnitude entry of each component positive) so a fit is reproducible.
+The fit is scikit-learn's ``PCA(svd_solver="full")``. Sign convention (the
+project's, kept from its first hand-written PCA): each component is flipped
+so that its largest-magnitude entry is positive, so a fit does not depend on
+the SVD's arbitrary signs. scikit-learn >= 1.5's ``svd_flip`` happens to pick
+the same signs, 1.3-1.4 (allowed by pyproject.toml) flip by ``U`` instead, so
+the signs are fixed here explicitly.
+
+No Drake, scikit-learn habits: hyper-parameters in the constructor, fitted
+attributes end in ``_``. The fitted state is stored as the five plain arrays
+of :meth:`GoalFeatures.to_arrays` (not a pickled estimator), so skills saved
+before the switch to scikit-learn load unchanged.
 """
 
 
@@ -20,6 +28,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from drake_skill.perception.pcae import CODE_SIZE
+
+
+def largest_entry_signs(components: np.ndarray) -> np.ndarray:
+    """``(k,)`` signs of each row's largest-magnitude entry (+1 for an all-zero row).
+
+    Multiplying row i of ``components (k, D)`` by sign i makes that entry
+    positive: the goal features' sign convention (see the module docstring).
+    """
+    rows = np.arange(components.shape[0])
+    signs = np.sign(components[rows, np.argmax(np.abs(components), axis=1)])
+    signs[signs == 0] = 1.0
+    return signs
 
 
 @dataclass
@@ -81,18 +101,16 @@ class GoalFeatures:
         t = x.shape[0]
         if t <= self.n_components:
             raise ValueError(f"codes: need more than n_components={self.n_components} samples to fit, got {t}")
-        mean = x.mean(axis=0)
-        _, s, vt = np.linalg.svd(x - mean, full_matrices=False)
-        comps = vt[: self.n_components]
-        signs = np.sign(comps[np.arange(self.n_components), np.argmax(np.abs(comps), axis=1)])
-        signs[signs == 0] = 1.0
-        comps = comps * signs[:, None]
-        var_all = s**2 / (t - 1)
-        total = var_all.sum()
-        self.mean_ = mean
-        self.components_ = comps
-        self.explained_variance_ = var_all[: self.n_components].copy()
-        self.explained_variance_ratio_ = (self.explained_variance_ / total) if total > 0 else np.zeros(self.n_components)
+        from sklearn.decomposition import PCA
+
+        pca = PCA(n_components=self.n_components, svd_solver="full").fit(x)
+        comps = np.array(pca.components_, dtype=np.float64)
+        self.mean_ = np.array(pca.mean_, dtype=np.float64)
+        self.components_ = comps * largest_entry_signs(comps)[:, None]
+        self.explained_variance_ = np.array(pca.explained_variance_, dtype=np.float64)
+        # scikit-learn gives NaN ratios for constant data (0 / 0); the project's are 0 there.
+        ratio = np.array(pca.explained_variance_ratio_, dtype=np.float64)
+        self.explained_variance_ratio_ = np.where(np.isfinite(ratio), ratio, 0.0)
         self.n_samples_ = t
         return self
 

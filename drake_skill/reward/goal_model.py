@@ -38,10 +38,16 @@ not do safely with 2-3 short sequences:
 Inference (log emission densities, log-space forward-backward, Viterbi) runs
 on the fitted parameters here; see :func:`forward_backward` for why.
 
-hmmlearn private API used (pin ``hmmlearn>=0.3,<0.4``): ``_covars_`` (the
-covariances as the M-step stores them, :func:`_full_covars`) and
-``hmmlearn._hmmc.forward_log`` / ``backward_log`` (compiled log-space
-recursions; a numpy fallback is used when they are absent).
+hmmlearn private API used (pin ``hmmlearn>=0.3,<0.4``): only
+``hmmlearn._hmmc.forward_log`` / ``backward_log``, the compiled log-space
+recursions behind its public ``score_samples``: the public API returns only
+the smoothed posteriors, and the online reward needs the *filtered* ones
+(the forward lattice) at every frame of every rollout, where the numpy
+recursion is a few times slower. A numpy fallback is used when they are
+absent, and tests/test_goal_model.py pins them: the compiled lattices equal
+the plain numpy recursion, and the smoothed posteriors and log-likelihood
+equal hmmlearn's public ``score_samples``. Covariances are read through the
+public ``covars_`` (:func:`_full_covars`).
 """
 
 import logging
@@ -406,20 +412,18 @@ def _segmental_kmeans(segs: list[np.ndarray], labels: list[np.ndarray], k: int,
 def _full_covars(model) -> np.ndarray:
     """A fitted hmmlearn GaussianHMM's covariances as full matrices ``(k, d, d)``.
 
-    Built from ``_covars_`` by hand: hmmlearn 0.3's spherical M-step stores
-    ``(k, d)`` variances, which its own ``covars_`` property expands to
-    ``(k d, d, d)``.
+    hmmlearn's public ``covars_`` property (full matrices for every
+    covariance type), with one correction: hmmlearn 0.3's spherical M-step
+    stores ``(k, d)`` equal variances where its property expects ``(k,)``,
+    so the property returns ``(k d, d, d)``: each state's ``d`` matrices are
+    averaged back into one (they are equal; the mean is also right for the
+    ``(k,)`` storage of an unfitted model, where there is one per state).
     """
     k, d = model.n_components, model.means_.shape[1]
-    c = np.asarray(model._covars_, dtype=float)
-    eye = np.eye(d)
-    if model.covariance_type == "spherical":
-        return np.ravel(c).reshape(k, -1).mean(axis=1)[:, None, None] * eye
-    if model.covariance_type == "diag":
-        return c[:, :, None] * eye
-    if model.covariance_type == "tied":
-        return np.broadcast_to(c, (k, d, d)).copy()
-    return c.copy()
+    c = np.asarray(model.covars_, dtype=float)
+    if model.covariance_type == "spherical" and c.shape[0] != k:
+        c = c.reshape(k, -1, d, d).mean(axis=1)
+    return np.array(c, dtype=float).reshape(k, d, d)
 
 
 def _split(lengths: np.ndarray) -> list[slice]:

@@ -3,9 +3,11 @@
 The plan (keyframe times, hand poses X_WE and finger openings) is an abstract
 *parameter* of the context, so one built diagram replays any plan: write a new
 plan into a reset context and simulate again. Poses are interpolated linearly
-in position and by spherical linear interpolation in orientation; the finger
-opening linearly. Before the first keyframe the first is held, after the last
-the last.
+in position and by spherical linear interpolation in orientation, Drake's
+``PiecewisePose.MakeLinear`` (a first-order hold and a
+``PiecewiseQuaternionSlerp``); the finger opening linearly (``np.interp``).
+Before the first keyframe the first is held, after the last the last (Drake's
+trajectories clamp the time to their span).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ from pydrake.common.eigen_geometry import Quaternion
 from pydrake.common.value import AbstractValue, Value
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import LeafSystem
+from pydrake.trajectories import PiecewisePose
 
 
 @dc.dataclass
@@ -55,6 +58,24 @@ class PosePlan:
             raise ValueError(f"PosePlan.quaternions must be unit quaternions; norms range "
                              f"{norms.min():.4f}..{norms.max():.4f}")
         self.quaternions = self.quaternions / norms[:, None]
+        self._trajectory = self._make_trajectory()
+
+    def _make_trajectory(self) -> PiecewisePose:
+        """X_WE(t) through the keyframes (one keyframe: held, as two equal knots 1 s apart)."""
+        poses = [RigidTransform(Quaternion(q), p) for q, p in zip(self.quaternions, self.positions)]
+        times = [float(t) for t in self.times]
+        if len(times) == 1:
+            times, poses = [times[0], times[0] + 1.0], poses * 2
+        return PiecewisePose.MakeLinear(times, poses)
+
+    # The trajectory is derived from the keyframes (Drake trajectories do not pickle):
+    # a pickled plan carries its arrays and rebuilds it (worker processes).
+    def __getstate__(self):
+        return {k: v for k, v in self.__dict__.items() if k != "_trajectory"}
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self._trajectory = self._make_trajectory()
 
     @classmethod
     def from_poses(cls, times, poses, gripper) -> "PosePlan":
@@ -66,25 +87,17 @@ class PosePlan:
     def duration(self) -> float:
         return float(self.times[-1])
 
+    @property
+    def trajectory(self) -> PiecewisePose:
+        """The hand trajectory X_WE(t) (Drake's PiecewisePose; do not modify the keyframe arrays)."""
+        return self._trajectory
+
     def pose(self, t: float) -> RigidTransform:
         """X_WE at time t [s]."""
-        i, s = self._segment(t)
-        p = (1 - s) * self.positions[i] + s * self.positions[i + 1] if s > 0 else self.positions[i]
-        q0 = Quaternion(self.quaternions[i])
-        if s > 0:
-            q0 = q0.slerp(s, Quaternion(self.quaternions[i + 1]))
-        return RigidTransform(q0, p)
+        return self._trajectory.GetPose(float(t))
 
     def opening(self, t: float) -> float:
         return float(np.interp(t, self.times, self.gripper))
-
-    def _segment(self, t: float) -> tuple[int, float]:
-        if t <= self.times[0] or len(self.times) == 1:
-            return 0, 0.0
-        if t >= self.times[-1]:
-            return len(self.times) - 1, 0.0
-        i = int(np.searchsorted(self.times, t, side="right")) - 1
-        return i, (t - self.times[i]) / (self.times[i + 1] - self.times[i])
 
 
 def hold_plan(X_WE: RigidTransform, opening: float = 0.0) -> PosePlan:

@@ -1,0 +1,80 @@
+"""A demonstration played back in Meshcat and saved as a standalone HTML page.
+
+The recorded joint positions ``q_100hz`` pose the Panda of the skill's
+scenario plant (:func:`drake_skill.station.builder.add_scene_plant`, what the
+station simulates), the finger opening ``gripper_100hz`` its fingers (each at
+half the opening), the object sits at ``X_WO_true`` with its joint at
+``object_state_100hz``. Nothing is simulated: each sample is drawn by a
+``ForcedPublish`` of the MeshcatVisualizer at the sample's time while Meshcat
+records; ``Meshcat.StaticHtml()`` gives the page (as the learning loop's
+``replay_first.html``). The object cloud is not drawn.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from drake_skill.demos.format import Demonstration
+
+__all__ = ["replay_html", "write_replay"]
+
+#: Meshcat's recording rate (frames per second); the 100 Hz samples are thinned to about it.
+FPS = 32.0
+
+
+def replay_html(demo: Demonstration, station_config=None, meshcat=None) -> str:
+    """The standalone Meshcat HTML of ``demo`` played back in its skill's scenario.
+
+    station_config: the scenario (default: the skill's shipped one); meshcat:
+    a Meshcat to record in (default: a new one, closed when this returns).
+    """
+    from pydrake.common.eigen_geometry import Quaternion
+    from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
+    from pydrake.math import RigidTransform
+    from pydrake.systems.framework import DiagramBuilder
+
+    from drake_skill.learning.loop import frame_meshcat_camera
+    from drake_skill.station.builder import add_scene_plant
+    from drake_skill.station.config import scenario_for_skill
+
+    config = station_config if station_config is not None else scenario_for_skill(demo.skill)
+    meshcat = meshcat if meshcat is not None else Meshcat()
+    builder = DiagramBuilder()
+    scene = add_scene_plant(builder, config)
+    MeshcatVisualizer.AddToBuilder(builder, scene.scene_graph, meshcat,
+                                   MeshcatVisualizerParams(role=Role.kIllustration))
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant, plant_context = scene.plant, scene.plant.GetMyMutableContextFromRoot(context)
+    v = np.asarray(demo.X_WO_true, dtype=float)
+    X_WO = RigidTransform(Quaternion(v[3:] / np.linalg.norm(v[3:])), v[:3])
+    plant.SetFreeBodyPose(plant_context, scene.object_base, X_WO)
+    joint_index = scene.object_joint.position_start()     # the lid's hinge or the drawer's slide
+    frame_meshcat_camera(meshcat, X_WO.translation())
+    step = max(1, int(round(1.0 / (FPS * float(np.median(np.diff(demo.times_100hz)))))))
+    samples = np.unique(np.append(np.arange(0, demo.times_100hz.size, step), demo.times_100hz.size - 1))
+    meshcat.StartRecording(frames_per_second=FPS, set_visualizations_while_recording=False)
+    try:
+        for k in samples:
+            context.SetTime(float(demo.times_100hz[k] - demo.times_100hz[0]))
+            plant.SetPositions(plant_context, scene.panda, demo.q_100hz[k])
+            plant.SetPositions(plant_context, scene.hand, np.full(2, 0.5 * demo.gripper_100hz[k]))
+            q = plant.GetPositions(plant_context)
+            q[joint_index] = demo.object_state_100hz[k]
+            plant.SetPositions(plant_context, q)
+            diagram.ForcedPublish(context)
+    finally:
+        meshcat.StopRecording()
+    meshcat.PublishRecording()
+    html = meshcat.StaticHtml()
+    meshcat.DeleteRecording()
+    return html
+
+
+def write_replay(demo: Demonstration, path, station_config=None, meshcat=None) -> Path:
+    """Writes :func:`replay_html` of ``demo`` to ``path`` atomically."""
+    from drake_skill.fileio import atomic_write_text
+
+    return atomic_write_text(path, replay_html(demo, station_config, meshcat))
