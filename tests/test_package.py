@@ -74,7 +74,8 @@ def test_wheel_holds_every_module_the_models_and_the_licence(wheel):
     assert {"drake_skill/models/pcae.safetensors", "drake_skill/models/panda_arm.sdf",
             "drake_skill/models/package.xml"} <= models
     assert models <= names, sorted(models - names)
-    assert "drake_skill/station/scenarios/open.yaml" in names
+    assert {"drake_skill/station/scenarios/box_closed.yaml", "drake_skill/station/scenarios/slider.yaml",
+            "drake_skill/skills/open.yaml", "drake_skill/skills/slide.yaml"} <= names
     (metadata,) = [n for n in names if n.endswith(".dist-info/METADATA")]
     meta = zipfile.ZipFile(wheel).read(metadata)
     assert b"License-Expression: BSD-3-Clause" in meta
@@ -89,8 +90,12 @@ def test_installed_wheel_loads_the_panda_and_the_encoder(wheel, tmp_path):
     np.save(tmp_path / "cloud.npy", cloud)
     # -S: no site-packages processing, so no .pth runs (an editable install's finder
     # would map drake_skill to the checkout); the dependencies come from this
-    # interpreter's path, less anything inside the checkout.
-    deps = [p for p in sys.path if p and Path(p).is_dir() and not Path(p).resolve().is_relative_to(REPO)]
+    # interpreter's path, less the checkout's own folders (its .venv, where make puts the
+    # dependencies, stays).
+    def in_checkout(p: Path) -> bool:
+        return p.is_relative_to(REPO) and not p.is_relative_to(REPO / ".venv")
+
+    deps = [p for p in sys.path if p and Path(p).is_dir() and not in_checkout(Path(p).resolve())]
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "DRAKE_SKILL_MODELS")}
     env["PYTHONPATH"] = os.pathsep.join([str(site), *deps])
     result = subprocess.run([sys.executable, "-S", "-c", _PROBE, str(tmp_path / "cloud.npy")], cwd=tmp_path,
