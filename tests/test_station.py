@@ -222,3 +222,30 @@ def test_object_joint_can_be_set():
     assert sim.object_state() == pytest.approx(0.7)
     sim.reset(0)
     assert sim.object_state() == pytest.approx(0.0, abs=1e-6)   # the lid rests on its stop by its weight
+
+
+def test_more_cameras_are_data_and_export_their_images():
+    """A scenario's ``cameras`` render beside the perception camera, which stays the one perception reads."""
+    from drake_skill.station.builder import build_station
+
+    config = load_station_config(data="""
+cameras:
+- name: overhead
+  width: 64
+  height: 48
+  focal: !FovDegrees {y: 60.0}
+  renderer_name: vtk
+  X_PB: {translation: [0.55, 0.0, 1.2], rotation: !Rpy {deg: [180.0, 0.0, 90.0]}}
+""")
+    station = build_station(config)
+    context = station.CreateDefaultContext()
+    image = station.GetOutputPort("overhead_color_image").Eval(context)
+    labels = station.GetOutputPort("overhead_label_image").Eval(context)
+    assert (image.width(), image.height()) == (64, 48)
+    # Looking straight down at the box: the middle pixel sees it (a label of a body, not empty).
+    assert int(labels.data[24, 32, 0]) not in (0, 32767, 32766)
+    assert station.GetOutputPort("point_cloud").Eval(context).size() == 640 * 480
+    with pytest.raises(ValueError, match=r"cameras\[0\]\.name"):
+        load_station_config(data="cameras: [{name: kinect, renderer_name: vtk}]")
+    with pytest.raises(ValueError, match=r"cameras\[0\]\.renderer_name"):
+        load_station_config(data="cameras: [{name: top, renderer_name: gl}]")

@@ -384,6 +384,14 @@ class Station(Diagram):
         # The perception systems read the crop of this camera where the object can
         # appear (object_point_cloud etc.; drake_skill/station/camera.py).
         self.object_camera = add_object_camera(builder, self, color, depth, world_id, self._X_WC)
+        for extra in self.config.cameras:     # for people and tools: rendered on demand, read by nothing
+            color, depth = extra.MakeCameras()
+            sensor = builder.AddNamedSystem(f"camera_{extra.name}", RgbdSensor(
+                world_id, extra.X_PB.GetDeterministicValue(), color, depth))
+            builder.Connect(self.render_scene.get_query_output_port(), sensor.query_object_input_port())
+            builder.ExportOutput(sensor.color_image_output_port(), f"{extra.name}_color_image")
+            builder.ExportOutput(sensor.depth_image_32F_output_port(), f"{extra.name}_depth_image")
+            builder.ExportOutput(sensor.label_image_output_port(), f"{extra.name}_label_image")
 
     def camera_pose(self) -> RigidTransform:
         """X_WC of the camera (Drake camera convention)."""

@@ -274,7 +274,12 @@ class StationConfig:
       models; ``file:///...`` or a path relative to the scenario file for yours).
     q_home: the Panda's initial joint positions [rad].
     gripper_home: initial finger opening (distance between fingers) [m].
-    enable_camera: add the RGB-D camera and its point cloud.
+    enable_camera: add the cameras (``camera`` and ``cameras``) and the point cloud.
+    camera: the camera perception reads (Drake's CameraConfig, a Kinect by
+      default, named ``kinect``): its images, its cloud and the object crop.
+    cameras: more cameras (Drake's CameraConfig, fixed in the world, the same
+      renderer), for people and tools: each exports ``<name>_color_image``,
+      ``<name>_depth_image`` and ``<name>_label_image``; nothing reads them.
     """
 
     plant: MultibodyPlantConfig = dc.field(default_factory=default_plant)
@@ -286,6 +291,7 @@ class StationConfig:
     object: ObjectConfig = dc.field(default_factory=ObjectConfig)
     contact: ContactConfig = dc.field(default_factory=ContactConfig)
     camera: CameraConfig = dc.field(default_factory=default_camera)
+    cameras: typing.List[CameraConfig] = dc.field(default_factory=list)
     controller: ControllerConfig = dc.field(default_factory=ControllerConfig)
     reflex: ReflexConfig = dc.field(default_factory=ReflexConfig)
     success: SuccessConfig = dc.field(default_factory=SuccessConfig)
@@ -377,30 +383,16 @@ def validate_station_config(config: StationConfig) -> StationConfig:
         _number(f"contact.{f.name}.stiffness", s.stiffness, 0.0, 1e9, lo_open=True, what="a stiffness [N/m]")
         _number(f"contact.{f.name}.relaxation_time", s.relaxation_time, 0.0, 1.0, what="a time [s]")
 
-    cam = config.camera
-    if not (16 <= cam.width <= 4096 and 16 <= cam.height <= 4096):
-        _bad("camera.width/height", (cam.width, cam.height), "16..4096 pixels each")
-    if isinstance(cam.focal, CameraConfig.FovDegrees):
-        for name in ("x", "y"):
-            value = getattr(cam.focal, name)
-            if value is not None:
-                _number(f"camera.focal.{name}", value, 1.0, 170.0, what="a field of view [deg]")
-    else:
-        for name in ("x", "y"):
-            value = getattr(cam.focal, name)
-            if value is not None:
-                _number(f"camera.focal.{name}", value, 0.0, 1e5, lo_open=True, what="a focal length [pixels]")
-    _number("camera.fps", cam.fps, 0.1, 120.0, what="a frame rate [Hz]")
-    _number("camera.z_near", cam.z_near, 0.0, math.inf, lo_open=True, what="a depth [m]")
-    _number("camera.z_far", cam.z_far, cam.z_near, math.inf, lo_open=True, what="a depth beyond z_near [m]")
-    _number("camera.clipping_near", cam.clipping_near, 0.0, cam.z_near, lo_open=True,
-            what="a clipping distance up to z_near [m]")
-    _number("camera.clipping_far", cam.clipping_far, cam.z_far, math.inf, what="a clipping distance beyond z_far [m]")
-    X = np.asarray(cam.X_PB.GetDeterministicValue().GetAsMatrix4())
-    if not np.all(np.isfinite(X)):
-        _bad("camera.X_PB", X[:3, 3].tolist(), "a finite pose")
-    if cam.X_PB.base_frame not in (None, "", "world", "WorldBody"):
-        _bad("camera.X_PB.base_frame", cam.X_PB.base_frame, "the world (the camera is fixed)")
+    names = [config.camera.name]
+    for i, extra in enumerate(config.cameras):
+        if extra.name in names:
+            _bad(f"cameras[{i}].name", extra.name, f"a name of its own (taken: {', '.join(names)})")
+        names.append(extra.name)
+        if extra.renderer_name != config.camera.renderer_name:
+            _bad(f"cameras[{i}].renderer_name", extra.renderer_name,
+                 f"'{config.camera.renderer_name}', the perception camera's (the station has one renderer)")
+        _validate_camera(extra, f"cameras[{i}]")
+    _validate_camera(config.camera, "camera")
 
     ctrl = config.controller
     _vector("controller.kp", ctrl.kp, 7, 0.0, 1e5, lo_open=True, what="positive stiffnesses [N m/rad]")
@@ -432,6 +424,33 @@ def validate_station_config(config: StationConfig) -> StationConfig:
         if config.success.joint != config.object.joint:
             _bad("success.joint", config.success.joint, f"the object's joint, object.joint = '{config.object.joint}'")
     return config
+
+
+def _validate_camera(cam: CameraConfig, field: str) -> None:
+    """Raises ValueError naming the field of a camera that cannot work."""
+    if not (16 <= cam.width <= 4096 and 16 <= cam.height <= 4096):
+        _bad(f"{field}.width/height", (cam.width, cam.height), "16..4096 pixels each")
+    if isinstance(cam.focal, CameraConfig.FovDegrees):
+        for name in ("x", "y"):
+            value = getattr(cam.focal, name)
+            if value is not None:
+                _number(f"{field}.focal.{name}", value, 1.0, 170.0, what="a field of view [deg]")
+    else:
+        for name in ("x", "y"):
+            value = getattr(cam.focal, name)
+            if value is not None:
+                _number(f"{field}.focal.{name}", value, 0.0, 1e5, lo_open=True, what="a focal length [pixels]")
+    _number(f"{field}.fps", cam.fps, 0.1, 120.0, what="a frame rate [Hz]")
+    _number(f"{field}.z_near", cam.z_near, 0.0, math.inf, lo_open=True, what="a depth [m]")
+    _number(f"{field}.z_far", cam.z_far, cam.z_near, math.inf, lo_open=True, what="a depth beyond z_near [m]")
+    _number(f"{field}.clipping_near", cam.clipping_near, 0.0, cam.z_near, lo_open=True,
+            what="a clipping distance up to z_near [m]")
+    _number(f"{field}.clipping_far", cam.clipping_far, cam.z_far, math.inf, what="a clipping distance beyond z_far [m]")
+    X = np.asarray(cam.X_PB.GetDeterministicValue().GetAsMatrix4())
+    if not np.all(np.isfinite(X)):
+        _bad(f"{field}.X_PB", X[:3, 3].tolist(), "a finite pose")
+    if cam.X_PB.base_frame not in (None, "", "world", "WorldBody"):
+        _bad(f"{field}.X_PB.base_frame", cam.X_PB.base_frame, "the world (the camera is fixed)")
 
 
 def load_station_config(path: str | Path | None = None, *, data: str | None = None,
