@@ -14,3 +14,12 @@ def quiet_differential_ik():
     logger.setLevel(logging.ERROR)
     yield
     logger.setLevel(level)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under pytest-xdist (``make test``: ``-n 2 --dist loadgroup``), each test file runs
+    on one worker, so its module fixtures (a fitted skill, a grid) are built once;
+    test_physics's long, independent checks (cheap fixtures) spread over the workers."""
+    for item in items:
+        if item.path.name != "test_physics.py":
+            item.add_marker(pytest.mark.xdist_group(item.path.stem))

@@ -4,14 +4,15 @@ Two scripted Close demonstrations recorded with a 160 x 120 camera (the
 segmenter, PCAE and reward see the same scene at a quarter of the pixels),
 fitted with the thesis' settings, and the DMPs' duration shortened to
 ``TAU`` s so that a rollout simulates ``TAU`` + ``SETTLE`` s. The folder
-lives under pytest's session temp root, guarded by a file lock, so every
-test module of a session reuses the same skill.
+lives under pytest's session temp root (the run's, under pytest-xdist), guarded
+by a file lock, so every test module of a session reuses the same skill.
 """
 
 from __future__ import annotations
 
 import dataclasses as dc
 import fcntl
+import os
 from pathlib import Path
 
 TAU = 2.0
@@ -36,7 +37,9 @@ def shared_skill(tmp_path_factory) -> dict:
     """``{"skill_dir", "demos_dir", "station_yaml", "station"}`` of the shared test skill."""
     from pydrake.common.yaml import yaml_dump_typed
 
-    root = tmp_path_factory.getbasetemp() / "learning_close_skill"
+    base = tmp_path_factory.getbasetemp()
+    # Under pytest-xdist every worker has a temp root of its own below the run's: share the run's.
+    root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "learning_close_skill"
     root.mkdir(exist_ok=True)
     station = small_station("close")
     paths = {"skill_dir": root / "skill", "demos_dir": root / "demos", "station_yaml": root / "station.yaml",
