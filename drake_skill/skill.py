@@ -37,10 +37,11 @@ from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
-from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.common.yaml import yaml_dump_typed
 
 from drake_skill.action.dmp import Dmp, DmpConfig, fit_demonstrations
 from drake_skill import fileio
+from drake_skill.configs import load_typed
 from drake_skill.perception.features import GoalFeatures, GoalFeaturesConfig
 from drake_skill.reward.pomrp import Pomrp, PomrpConfig, fit_pomrp
 from drake_skill.skills import SkillSpec, load_skill
@@ -365,10 +366,7 @@ def _load_config(path: Path, version: int) -> SkillConfig:
     if version <= 2:
         # Skills before version 3 encoded world-frame clouds.
         defaults.cloud_frame = "world"
-    try:
-        config = yaml_load_typed(schema=SkillConfig, filename=str(path), defaults=defaults)
-    except RuntimeError as e:
-        raise ValueError(f"{path}: {e}") from e
+    config = load_typed(SkillConfig, what="skill config", path=path, defaults=defaults)
     if not config.spec.name:
         # Skills fitted before skill files (schema version 4) name a shipped skill.
         try:

@@ -13,7 +13,7 @@ MATH_BOXES = ("action", "perception", "reward", "learning")
 #: in ``learning``, the rollout runner and its workers, which simulate the diagram.
 DRAKE_SIDE = ("systems", "rollout", "workers")
 #: Drake-free modules outside the boxes.
-MATH_MODULES = ("drake_skill.common", "drake_skill.fileio", "drake_skill.resources")
+MATH_MODULES = ("drake_skill.common", "drake_skill.configs", "drake_skill.fileio", "drake_skill.resources")
 
 # Makes ``import pydrake`` (and any submodule) fail, then imports the module.
 _PROBE = """

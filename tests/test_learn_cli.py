@@ -175,3 +175,26 @@ def test_evaluate_explore_reports_the_spread_of_exploratory_returns(learned, cap
     assert any(ran)
     assert all((r > 0.0) == ok and (ok or r == 0.0) for r, ok in zip(report["returns"], ran)), report
     assert main(["evaluate", "--skill-dir", str(shared["skill_dir"]), "--explore", "-1"]) == 2
+
+
+def test_learn_config_file_flags_override_it_and_print_config_shows_the_effect(tmp_path, capsys):
+    from pydrake.common.yaml import yaml_load_typed
+
+    from drake_skill.cli.learn_config import LearnFile
+
+    config = tmp_path / "learn.yaml"
+    config.write_text("skill: draw\nworkers: 1\nlearn: {method: cma-es, episodes: 3, seed: 4}\n"
+                      "station:\n  object: {x: 0.66}\n")
+    assert main(["learn", "--config", str(config), "--episodes", "4", "--print-config"]) == 0
+    effective = yaml_load_typed(schema=LearnFile, data=capsys.readouterr().out)
+    assert (effective.skill, effective.workers) == ("draw", 1)
+    # The file's settings, the flag over the file, LearnConfig's defaults for the rest.
+    assert (effective.learn.method, effective.learn.episodes, effective.learn.seed, effective.learn.rollouts) == (
+        "cma-es", 4, 4, 6)
+    # The station: the skill's scenario (the drawer) with the file's override.
+    assert (effective.station.object.model, effective.station.object.x) == ("drawer", 0.66)
+    assert effective.station.success.joint == "drawer_slide"
+    config.write_text("skill: draw\nlearn: {methd: cma-es}\n")
+    assert main(["learn", "--config", str(config), "--print-config"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--config" in err and "methd" in err

@@ -59,15 +59,10 @@ def load_yaml(schema, path: Path, option: str, defaults=None):
 
     Bad YAML or an unknown key is a ValueError naming the file and the key.
     """
-    import yaml
-    from pydrake.common.yaml import yaml_load_typed
+    from drake_skill.configs import load_typed
 
     path = input_file(path, option, f"a YAML file of {schema.__name__} fields")
-    try:
-        return yaml_load_typed(schema=schema, filename=str(path),
-                               defaults=defaults if defaults is not None else schema())
-    except (RuntimeError, yaml.YAMLError) as e:
-        raise ValueError(f"{option} {path}: {' '.join(str(e).split())}") from e
+    return load_typed(schema, what=option, path=path, defaults=defaults)
 
 
 def skill(value, option: str = "--skill"):

@@ -53,27 +53,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     source = parser.add_argument_group("skill")
+    source.add_argument("--config", type=Path, metavar="FILE",
+                        help="the run's settings in one YAML (skill, out, workers, learn: LearnConfig, station: "
+                             "overrides of the skill's scenario; drake_skill/cli/learn_config.py); flags override it")
+    source.add_argument("--print-config", action="store_true",
+                        help="print the effective settings (file, flags and defaults) as YAML and run nothing")
     source.add_argument("--skill", default=None, metavar="SKILL",
                         help="the skill to learn: a shipped skill's name (drake-skill skills) or a skill "
                              "file; needed unless --skill-dir or --demos of a shipped skill says it")
     source.add_argument("--skill-dir", type=Path, help="start from this fitted skill")
     source.add_argument("--demos", type=Path, help="fit the skill from these demonstrations (demo_*.npz)")
     search = parser.add_argument_group("policy search")
-    search.add_argument("--method", choices=_METHODS, default="pi2-es-cov", help="default: pi2-es-cov")
-    search.add_argument("--reward", choices=("dense", "sparse"), default="dense",
+    search.add_argument("--method", choices=_METHODS, default=None, help="default: pi2-es-cov")
+    search.add_argument("--reward", choices=("dense", "sparse"), default=None,
                         help="dense: POMRP return (per-step rewards for pi2, pi2-cov); sparse: the "
                              "goal model's verdict (default dense)")
     search.add_argument("--weighting", choices=("thesis", "range"), default=None,
                         help="rollout weighting of the PI^2 family: thesis (Eq. 5.1, exp(R/C)) or range "
                              "(exp(h (R - min)/(max - min))); default: the method's")
-    search.add_argument("--episodes", type=int, default=5, help="updates (default 5)")
-    search.add_argument("--rollouts", type=int, default=6, help="rollouts per update (default 6)")
+    search.add_argument("--episodes", type=int, default=None, help="updates (default 5)")
+    search.add_argument("--rollouts", type=int, default=None, help="rollouts per update (default 6)")
     search.add_argument("--exploration-scale", type=float, default=None, metavar="S",
                         help="sigma_0 of thesis Eq. 5.3: the first episode explores with S x Sigma_0, the "
                              "demonstrations' weight covariance (default: the skill's, "
                              f"{exploration_scales_text()}; the thesis: 1)")
-    search.add_argument("--seed", type=int, default=0, help="policy search and object-pose seed (default 0)")
-    search.add_argument("--held-out", type=int, default=10,
+    search.add_argument("--seed", type=int, default=None, help="policy search and object-pose seed (default 0)")
+    search.add_argument("--held-out", type=int, default=None,
                         help="held-out object poses for greedy success before and after (0: off; default 10)")
     run = parser.add_argument_group("run")
     run.add_argument("--workers", type=int, default=None,
@@ -95,11 +100,75 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _station_config(args, skill):
-    from drake_skill.station.config import load_station_config, scenario_for_skill
+    """The skill's scenario, under the --config file's ``station`` and then --scenario."""
+    from drake_skill.configs import load_typed
+    from drake_skill.station.config import load_station_config, scenario_for_skill, validate_station_config
 
+    station = scenario_for_skill(skill)
+    if args.config is not None:
+        from drake_skill.cli.learn_config import LearnFile
+        station = load_typed(LearnFile, what="--config", path=args.config,
+                             defaults=LearnFile(station=station)).station
+        try:
+            validate_station_config(station)
+        except ValueError as e:
+            raise ValueError(f"--config {args.config}: station: {e}") from None
     if args.station_config is None:
-        return scenario_for_skill(skill)
-    return load_station_config(args.station_config, defaults=scenario_for_skill(skill))
+        return station
+    return load_station_config(args.station_config, defaults=station)
+
+
+_FILE_FLAGS = ("skill", "skill_dir", "demos", "out")
+_LEARN_FLAGS = ("method", "reward", "weighting", "episodes", "rollouts", "seed", "held_out", "exploration_scale")
+
+
+def _apply_config_file(args) -> None:
+    """Fills the flags not given from the --config file, then from LearnConfig's defaults."""
+    from drake_skill.learning.loop import LearnConfig
+
+    learn = LearnConfig()
+    if args.config is not None:
+        from drake_skill.cli.learn_config import LearnFile
+        from drake_skill.configs import load_typed
+
+        errors.input_file(args.config, "--config", "a YAML file of drake-skill learn settings")
+        loaded = load_typed(LearnFile, what="--config", path=args.config)
+        for name in _FILE_FLAGS:
+            if getattr(args, name) is None and getattr(loaded, name):
+                setattr(args, name, getattr(loaded, name) if name == "skill" else Path(getattr(loaded, name)))
+        if args.workers is None and loaded.workers:
+            args.workers = loaded.workers
+        learn = loaded.learn
+    for name in _LEARN_FLAGS:
+        if getattr(args, name) is None:
+            setattr(args, name, getattr(learn, name))
+
+
+def _print_config(args) -> None:
+    """The effective settings as the --config file would hold them."""
+    from pydrake.common.yaml import yaml_dump_typed
+
+    from drake_skill.cli.learn_config import LearnFile
+    from drake_skill.learning.loop import LearnConfig
+    from drake_skill.skill import Skill
+
+    if args.skill is not None:
+        spec = errors.skill(args.skill)
+    elif args.skill_dir is not None:
+        spec = Skill.load(args.skill_dir).spec
+    elif args.demos is not None:
+        from drake_skill.demos.format import load_demonstrations
+        demos = load_demonstrations(args.demos)
+        spec = errors.skill(demos[0].skill if demos else "", f"--demos {args.demos}")
+    else:
+        raise ValueError("--print-config: no skill; give --skill, --skill-dir or --demos (or put one in --config)")
+    learn = LearnConfig(**{name: getattr(args, name) or ("" if name == "weighting" else None)
+                           if name in ("weighting", "exploration_scale") else getattr(args, name)
+                           for name in _LEARN_FLAGS})
+    effective = LearnFile(skill=str(args.skill or ""), skill_dir=str(args.skill_dir or ""),
+                          demos=str(args.demos or ""), out=str(args.out or ""), workers=int(args.workers or 0),
+                          learn=learn.validate(), station=_station_config(args, spec))
+    print(yaml_dump_typed(effective), end="")
 
 
 def _save_demos(demos, directory: Path) -> None:
@@ -166,6 +235,10 @@ def run(args: argparse.Namespace) -> int:
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.skill import Skill
 
+    _apply_config_file(args)
+    if args.print_config:
+        _print_config(args)
+        return 0
     if args.workers is None:
         from drake_skill.learning.workers import default_workers
 

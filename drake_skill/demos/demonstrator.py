@@ -40,14 +40,16 @@ tries the next seed, so the recorded ``seed`` is the one that succeeded, and
 """
 
 import dataclasses as dc
+import functools
 import math
 from typing import Callable
 
 import numpy as np
-from pydrake.common.yaml import yaml_load_typed
 from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.math import RigidTransform, RotationMatrix
 
+from drake_skill import configs
+from drake_skill.configs import load_typed
 from drake_skill.demos.format import Demonstration, downsample_action, object_frame_poses
 from drake_skill.station.pose_source import PosePlan
 from drake_skill.station.simulation import ReflexError, StationRecorder, StationSimulation, pose_to_vector
@@ -121,8 +123,7 @@ class DemonstratorConfig:
 
     def validate(self) -> "DemonstratorConfig":
         """Raises ValueError naming the field that cannot work; returns self."""
-        def bad(field, value, expected):
-            raise ValueError(f"demonstrator config field '{field}' = {value!r}: expected {expected}")
+        bad = functools.partial(configs.bad, "demonstrator config")
 
         if self.count < 0:
             bad("count", self.count, "0 (thesis default) or a positive number of demonstrations")
@@ -157,14 +158,7 @@ class DemonstratorConfig:
 
 def load_demonstrator_config(path=None, *, data: str | None = None) -> DemonstratorConfig:
     """A DemonstratorConfig from a YAML file or string (missing keys keep their defaults)."""
-    if (path is None) == (data is None):
-        raise ValueError("give exactly one of path= or data=")
-    try:
-        config = yaml_load_typed(schema=DemonstratorConfig, filename=None if path is None else str(path),
-                                 data=data, defaults=DemonstratorConfig())
-    except RuntimeError as e:
-        raise ValueError(f"demonstrator config ({path or 'YAML'}): {e}") from e
-    return config.validate()
+    return load_typed(DemonstratorConfig, what="demonstrator config", path=path, data=data).validate()
 
 
 # --------------------------------------------------------------------------- variation

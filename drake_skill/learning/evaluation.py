@@ -136,7 +136,7 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     median, max, standard deviation), ground-truth successes, final object
     states and failures by reason.
     """
-    from drake_skill.learning.loop import _valid_exploration_scale
+    from drake_skill.learning.config import _valid_exploration_scale
     from drake_skill.learning.policy_search import make_policy_search
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec, make_pool

@@ -59,6 +59,7 @@ import math
 import numpy as np
 from scipy import ndimage
 
+from drake_skill import configs
 from drake_skill.common import N_POINTS
 
 __all__ = [
@@ -134,8 +135,7 @@ class SegmentationConfig:
 
     def validate(self) -> "SegmentationConfig":
         """Raises ValueError naming the field that cannot work; returns self."""
-        def bad(field, value, expected):
-            raise ValueError(f"segmentation config field '{field}' = {value!r}: expected {expected}")
+        bad = functools.partial(configs.bad, "segmentation config")
 
         for name in ("workspace_min", "workspace_max"):
             v = getattr(self, name)

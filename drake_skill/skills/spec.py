@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 from pydrake.common.schema import Transform
-from pydrake.common.yaml import yaml_load_typed
 from pydrake.math import RigidTransform, RotationMatrix
 
+from drake_skill.configs import load_typed
 from drake_skill.station.config import (SCENARIO_DIR, StationConfig, SuccessConfig, load_station_config,
                                         object_joint_name, validate_success)
 from drake_skill.station.limits import FINGER_MAX
@@ -216,9 +216,9 @@ def load_skill(skill) -> SkillSpec:
                                 "and not a file; give one of those or a path to a skill YAML")
     where = str(path)
     try:
-        spec = yaml_load_typed(schema=SkillSpec, filename=str(path), defaults=SkillSpec())
-    except RuntimeError as e:
-        raise ValueError(f"{where}: {str(e).splitlines()[0]}; see docs/skills.md for the fields") from None
+        spec = load_typed(SkillSpec, what="skill file", path=path)
+    except ValueError as e:
+        raise ValueError(f"{e}; see docs/skills.md for the fields") from None
     if spec.scenario and _looks_like_path(spec.scenario) and not Path(spec.scenario).is_absolute():
         spec.scenario = str((path.parent / spec.scenario).resolve())
     _check(spec, where)

@@ -16,6 +16,7 @@ the offending field.
 
 
 import dataclasses as dc
+import functools
 import math
 import typing
 from pathlib import Path
@@ -29,7 +30,9 @@ from pydrake.multibody.parsing import ModelDirective
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.sensors import CameraConfig
 
+from drake_skill import configs
 from drake_skill.common import look_at
+from drake_skill.configs import load_typed
 from drake_skill.station import limits
 
 #: The model instances every station's directives must add (the object's is named in ``object.model``).
@@ -303,8 +306,7 @@ class StationConfig:
 
 
 # ----------------------------------------------------------------------------- validation
-def _bad(field: str, value, expected: str):
-    raise ValueError(f"station config field '{field}' = {value!r}: expected {expected}")
+_bad = functools.partial(configs.bad, "station config")
 
 
 def _number(field, value, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False, what="a number"):
@@ -460,19 +462,9 @@ def load_station_config(path: str | Path | None = None, *, data: str | None = No
     Keys left out keep their defaults (``defaults``, else the built-in
     :class:`StationConfig`); an unknown key (a typo) is an error that names it.
     """
-    if (path is None) == (data is None):
-        raise ValueError("give exactly one of path= or data=")
-    if path is not None:
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"station config {path}: no such file")
+    config = load_typed(StationConfig, what="station config", path=path, data=data, defaults=defaults)
+    path = None if path is None else Path(path)
     where = f"{path}" if path is not None else "YAML"
-    try:
-        config = yaml_load_typed(
-            schema=StationConfig, filename=str(path) if path is not None else None,
-            data=data, defaults=defaults or StationConfig())
-    except RuntimeError as e:
-        raise ValueError(f"station config ({where}): {e}") from e
     base = path.parent if path is not None else Path.cwd()
     for d in config.directives:                      # a user's model file, relative to the scenario
         if d.add_model is not None and "://" not in d.add_model.file:

@@ -12,11 +12,13 @@ into a ``ValueError`` naming the field.
 """
 
 import dataclasses as dc
+import functools
 import math
 from pathlib import Path
 
-from pydrake.common.yaml import yaml_load_typed
 
+from drake_skill import configs
+from drake_skill.configs import load_typed
 from drake_skill.station.config import StationConfig, validate_station_config
 
 CAMERA_SOURCES = ("lcm", "realsense")
@@ -80,8 +82,7 @@ class HardwareConfig:
 
 def validate_hardware_config(config: HardwareConfig) -> HardwareConfig:
     """Raises ValueError naming the field of ``config`` that cannot work; returns it."""
-    def bad(field: str, value, expected: str):
-        raise ValueError(f"hardware config field '{field}' = {value!r}: expected {expected}")
+    bad = functools.partial(configs.bad, "hardware config")
 
     if not isinstance(config, HardwareConfig):
         raise ValueError(f"config must be a HardwareConfig, got {type(config).__name__}")
@@ -114,15 +115,5 @@ def validate_hardware_config(config: HardwareConfig) -> HardwareConfig:
 def load_hardware_config(path: str | Path | None = None, *, data: str | None = None,
                          defaults: HardwareConfig | None = None) -> HardwareConfig:
     """A HardwareConfig from a YAML file or string (missing keys keep their defaults)."""
-    if (path is None) == (data is None):
-        raise ValueError("give exactly one of path= or data=")
-    if path is not None:
-        path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"hardware config {path}: no such file")
-    try:
-        config = yaml_load_typed(schema=HardwareConfig, filename=None if path is None else str(path),
-                                 data=data, defaults=defaults or HardwareConfig())
-    except RuntimeError as e:
-        raise ValueError(f"hardware config ({path or 'YAML'}): {e}") from e
+    config = load_typed(HardwareConfig, what="hardware config", path=path, data=data, defaults=defaults)
     return validate_hardware_config(config)
