@@ -198,3 +198,23 @@ def test_learn_config_file_flags_override_it_and_print_config_shows_the_effect(t
     assert main(["learn", "--config", str(config), "--print-config"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--config" in err and "methd" in err
+
+
+def test_a_learn_run_from_a_config_file_equals_the_same_run_from_flags(learned, tmp_path):
+    """learned's run (flags: --skill-dir, --station-config, --episodes 1 --rollouts 2 --held-out 2 --seed 5)
+    again from one --config file holding the same settings and the station: the same numbers."""
+    shared, out, _ = learned
+    station = "".join(f"  {line}\n" for line in shared["station_yaml"].read_text().splitlines())
+    config = tmp_path / "run.yaml"
+    config.write_text(f"skill_dir: {shared['skill_dir']}\nout: {tmp_path / 'run'}\n"
+                      "learn: {episodes: 1, rollouts: 2, held_out: 2, seed: 5}\n" f"station:\n{station}")
+    assert main(["learn", "--config", str(config), "--quiet", "--no-replay"]) == 0
+
+    def numbers(folder):
+        records = [json.loads(line) for line in (folder / "results.jsonl").read_text().splitlines()]
+        return [{k: v for k, v in r.items() if k not in ("wall_s", "wall_s_this_call")} for r in records]
+
+    assert numbers(tmp_path / "run") == numbers(out)
+    settings = {k: v for k, v in json.loads((out / "config.json").read_text()).items() if k != "versions"}
+    again = {k: v for k, v in json.loads((tmp_path / "run" / "config.json").read_text()).items() if k != "versions"}
+    assert again == settings
