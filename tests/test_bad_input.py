@@ -7,14 +7,13 @@ import shutil
 
 import numpy as np
 import pytest
-from scipy.special import logsumexp
 
 from drake_skill.action.dmp import DmpConfig, fit_demonstrations
 from drake_skill.fileio import atomic_save_npz, file_sha256, load_npz
 from drake_skill.perception.features import GoalFeatures
 from drake_skill.perception.pcae import default_weights
-from drake_skill.reward.goal_model import GoalHMM, GoalModelConfig, _backward_log, forward_backward, forward_log
-from drake_skill.reward.pomrp import OffModelConfig, Pomrp, PomrpConfig, fit_pomrp
+from drake_skill.reward.goal_model import GoalModelConfig
+from drake_skill.reward.pomrp import PomrpConfig, fit_pomrp
 from drake_skill.skill import Skill, SkillConfig
 
 
@@ -71,8 +70,6 @@ def _copy(saved_skill, tmp_path):
 
 def _rewrite_arrays(directory, **changes):
     """Edits arrays.npz and updates its checksum, as a writer of a bad model would."""
-    from drake_skill.fileio import file_sha256
-
     arrays = load_npz(directory / "arrays.npz")
     for k, v in changes.items():
         if v is None:

@@ -52,7 +52,6 @@ def test_cropped_render_equals_the_crop_of_the_full_frame(skill):
     # The colour is rendered FXAA_REACH_PX beyond the window, where the image extends.
     assert station.object_camera.color_padding == tuple(min(FXAA_REACH_PX, m) for m in (
         window.x0, window.y0, info.width() - window.x0 - window.width, info.height() - window.y0 - window.height))
-    hand_body = int(station.plant.GetBodyByName("panda_hand").index())
     X_WO = sim.reset(2)
     sim.set_plan(scripted_plan(skill, X_WO, sim.home_pose()))
     hand_ids = [int(station.plant.GetBodyByName(name).index()) for name in HAND_BODIES]

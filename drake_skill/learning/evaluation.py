@@ -112,7 +112,8 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
                    leave=False, file=sys.stderr)
         try:
             with make_pool(spec, workers, ray_address) as pool:
-                policy, _ = evaluate_greedy(pool, skill.dmps[index].weights, seeds, lambda i, r: bar.update(1))
+                policy, _ = evaluate_greedy(pool, skill.dmps[index].weights, seeds,
+                                            lambda i, r, bar=bar: bar.update(1))
         finally:
             bar.close()
         policy["initial"] = index == skill.initial_index

@@ -142,7 +142,6 @@ from drake_skill.perception.pcae import (CODE_SIZE, N_POINTS, PointCloudAutoenco
                                          cloud_in_object_frame, load_pcae)
 from drake_skill.perception.segmentation import (
     BOUNDING_BOX_SIZE,
-    N_POINTS,
     SegmentationConfig,
     fit_table_plane,
     process_frame,
