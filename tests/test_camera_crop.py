@@ -73,7 +73,8 @@ def test_cropped_render_equals_the_crop_of_the_full_frame(skill):
         hand_seen = max(hand_seen, int(np.isin(labels, hand_ids).sum()))
         # Depth: within 1 mm wherever both have a return; the returns themselves agree
         # (a silhouette pixel may flip: measured 0-1 pixels of ~80,000).
-        depth, full_depth = port["object_depth_image"].Eval(context).data, window.crop(port["depth_image"].Eval(context).data)
+        depth = port["object_depth_image"].Eval(context).data
+        full_depth = window.crop(port["depth_image"].Eval(context).data)
         both = np.isfinite(depth) & np.isfinite(full_depth)
         assert np.count_nonzero(np.isfinite(depth) != np.isfinite(full_depth)) <= 3
         # Within 1 mm at every pixel both label alike; a pixel the two label differently sits
