@@ -13,7 +13,6 @@ from __future__ import annotations
 import dataclasses as dc
 import fcntl
 import os
-from pathlib import Path
 
 TAU = 2.0
 SETTLE = 0.3

@@ -4,7 +4,6 @@ leaves a folder that loads as wholly the old set or wholly the new one."""
 
 import shutil
 
-import numpy as np
 import pytest
 
 from drake_skill import fileio
@@ -79,7 +78,7 @@ def test_fallback_swap_without_exchange(tmp_path, monkeypatch):
     assert Skill.load(target).config.seed == 5
     assert sorted(p.name for p in tmp_path.iterdir()) == ["skill"]
     # Simulate the stop between the renames: target renamed aside, new not yet in place.
-    aside = tmp_path / f".skill.old-123"
+    aside = tmp_path / ".skill.old-123"
     target.rename(aside)
     with pytest.raises(FileNotFoundError, match=r"an interrupted save left the previous skill in .*\.skill\.old-123"):
         Skill.load(target)

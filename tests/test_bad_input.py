@@ -7,14 +7,13 @@ import shutil
 
 import numpy as np
 import pytest
-from scipy.special import logsumexp
 
 from drake_skill.action.dmp import DmpConfig, fit_demonstrations
 from drake_skill.fileio import atomic_save_npz, file_sha256, load_npz
 from drake_skill.perception.features import GoalFeatures
 from drake_skill.perception.pcae import default_weights
-from drake_skill.reward.goal_model import GoalHMM, GoalModelConfig, _backward_log, forward_backward, forward_log
-from drake_skill.reward.pomrp import OffModelConfig, Pomrp, PomrpConfig, fit_pomrp
+from drake_skill.reward.goal_model import GoalModelConfig
+from drake_skill.reward.pomrp import PomrpConfig, fit_pomrp
 from drake_skill.skill import Skill, SkillConfig
 
 
@@ -71,8 +70,6 @@ def _copy(saved_skill, tmp_path):
 
 def _rewrite_arrays(directory, **changes):
     """Edits arrays.npz and updates its checksum, as a writer of a bad model would."""
-    from drake_skill.fileio import file_sha256
-
     arrays = load_npz(directory / "arrays.npz")
     for k, v in changes.items():
         if v is None:
@@ -107,7 +104,8 @@ def _bad_arrays(skill_arrays):
     rows[0, 0] += 0.2
     return [
         ({"pomrp_hmm_covars": nan_cov}, r"pomrp_hmm_covars: contains NaN"),
-        ({"pomrp_hmm_terminal_states": np.array([k + 3])}, rf"pomrp_hmm_terminal_states: \[{k + 3}\], expected distinct states in \[0, {k}\)"),
+        ({"pomrp_hmm_terminal_states": np.array([k + 3])},
+         rf"pomrp_hmm_terminal_states: \[{k + 3}\], expected distinct states in \[0, {k}\)"),
         ({"pomrp_hmm_transmat": rows}, r"pomrp_hmm_transmat: row 0 sums to 1\.2"),
         ({"initial_index": np.array(5)}, r"initial_index: 5, expected an integer in \[0, 2\)"),
         ({"sigma0": np.zeros((10, 6, 6))}, r"sigma0: shape \(10, 6, 6\), expected \(10, 7, 7\)"),
@@ -129,7 +127,8 @@ def test_skill_load_rejects_bad_arrays(saved_skill, tmp_path):
 
 def test_skill_load_rejects_config_that_disagrees_with_arrays(saved_skill, tmp_path):
     for i, (old, new, message) in enumerate([
-            ("n_basis: 10", "n_basis: 12", r"dmp0_weights: shape \(10, 7\) disagrees with skill\.yaml \(dmp\.n_basis = 12"),
+            ("n_basis: 10", "n_basis: 12",
+             r"dmp0_weights: shape \(10, 7\) disagrees with skill\.yaml \(dmp\.n_basis = 12"),
             ("skill: open", "skill: close", r"skill\.json: field 'skill' is 'open' but skill\.yaml says 'close'"),
             ("margin: 10.0", "margin: 3.0", r"pomrp\.off_model: skill\.yaml says .*margin=3\.0"),
             ("n_components: 8", "n_components: 6", r"pca_components: shape \(8, 128\) disagrees with skill\.yaml")]):

@@ -52,7 +52,6 @@ def test_cropped_render_equals_the_crop_of_the_full_frame(skill):
     # The colour is rendered FXAA_REACH_PX beyond the window, where the image extends.
     assert station.object_camera.color_padding == tuple(min(FXAA_REACH_PX, m) for m in (
         window.x0, window.y0, info.width() - window.x0 - window.width, info.height() - window.y0 - window.height))
-    hand_body = int(station.plant.GetBodyByName("panda_hand").index())
     X_WO = sim.reset(2)
     sim.set_plan(scripted_plan(skill, X_WO, sim.home_pose()))
     hand_ids = [int(station.plant.GetBodyByName(name).index()) for name in HAND_BODIES]
@@ -74,7 +73,8 @@ def test_cropped_render_equals_the_crop_of_the_full_frame(skill):
         hand_seen = max(hand_seen, int(np.isin(labels, hand_ids).sum()))
         # Depth: within 1 mm wherever both have a return; the returns themselves agree
         # (a silhouette pixel may flip: measured 0-1 pixels of ~80,000).
-        depth, full_depth = port["object_depth_image"].Eval(context).data, window.crop(port["depth_image"].Eval(context).data)
+        depth = port["object_depth_image"].Eval(context).data
+        full_depth = window.crop(port["depth_image"].Eval(context).data)
         both = np.isfinite(depth) & np.isfinite(full_depth)
         assert np.count_nonzero(np.isfinite(depth) != np.isfinite(full_depth)) <= 3
         # Within 1 mm at every pixel both label alike; a pixel the two label differently sits

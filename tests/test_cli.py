@@ -1,7 +1,10 @@
 """The drake-skill command line: dispatch, help and errors."""
 
 import json
+import re
+from pathlib import Path
 
+from drake_skill.cli import main as cli_main
 from drake_skill.cli.main import main
 
 
@@ -35,14 +38,6 @@ def test_station_demo_writes_results(tmp_path, capsys):
 
 
 # ------------------------------------------------------------- one argparse tree
-import importlib
-import re
-from pathlib import Path
-
-import pytest
-
-from drake_skill.cli import main as cli_main
-
 
 def test_global_options_are_in_help_and_version_prints(capsys):
     assert main(["--help"]) == 0

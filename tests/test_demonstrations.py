@@ -304,12 +304,12 @@ def test_interrupted_record_force_leaves_old_or_new(tmp_path, monkeypatch):
             for name in steps:
                 real = getattr(fileio, name)
 
-                def step(*args, _real=real, **kwargs):
-                    if state["fired"]:
+                def step(*args, _real=real, _state=state, _at=at, **kwargs):
+                    if _state["fired"]:
                         return None
-                    state["n"] += 1
-                    if state["n"] == at:
-                        state["fired"] = True
+                    _state["n"] += 1
+                    if _state["n"] == _at:
+                        _state["fired"] = True
                         raise Interrupted()
                     return _real(*args, **kwargs)
                 m.setattr(fileio, name, step)
@@ -379,11 +379,11 @@ def test_interrupted_append_leaves_old_or_new(tmp_path, monkeypatch):
             for name in steps:
                 real = getattr(fileio, name)
 
-                def step(*args, _real=real, **kwargs):
-                    if not state["fired"]:
-                        state["n"] += 1
-                        if state["n"] == at:
-                            state["fired"] = True
+                def step(*args, _real=real, _state=state, _at=at, **kwargs):
+                    if not _state["fired"]:
+                        _state["n"] += 1
+                        if _state["n"] == _at:
+                            _state["fired"] = True
                             raise Interrupted()
                     return _real(*args, **kwargs)
                 m.setattr(fileio, name, step)

@@ -132,12 +132,14 @@ def test_integration_matches_adaptive_ode_solver():
     np.testing.assert_allclose(out, ref, atol=1e-8)
     # off-grid times are interpolated linearly from the 1 ms grid: error <= h^2 max|ydd| / 8 (~2e-6 m here)
     odd = np.array([0.0, 0.0123, 0.5004, 1.7777])
-    odd_ref = solve_ivp(rhs, (0.0, 1.7777), np.concatenate([Y0, np.zeros(7)]), t_eval=odd, rtol=1e-11, atol=1e-12).y[:7].T
+    odd_ref = solve_ivp(rhs, (0.0, 1.7777), np.concatenate([Y0, np.zeros(7)]), t_eval=odd,
+                        rtol=1e-11, atol=1e-12).y[:7].T
     np.testing.assert_allclose(integrate(dmp, cfg, odd, normalize_quaternion=False), odd_ref, atol=5e-6)
 
 
 def test_closed_form_discretisation_matches_expm():
-    for k, d, tau, h in [(100.0, 20.0, 5.0, 1e-3), (100.0, 20.0, 0.3, 0.01), (100.0, 5.0, 2.0, 1e-3), (100.0, 40.0, 2.0, 0.1)]:
+    for k, d, tau, h in [(100.0, 20.0, 5.0, 1e-3), (100.0, 20.0, 0.3, 0.01),
+                         (100.0, 5.0, 2.0, 1e-3), (100.0, 40.0, 2.0, 0.1)]:
         m = np.zeros((3, 3))
         m[0, 1], m[1, 0], m[1, 1], m[1, 2] = 1.0, -k / tau**2, -d / tau, 1.0 / tau**2
         e = scipy.linalg.expm(m * h)
@@ -158,7 +160,8 @@ def test_batch_integration_equals_single_calls(demo):
     batch = integrate(dmp, cfg, times, weights=samples)
     assert batch.shape == (4, len(times), 7)
     for s in range(4):
-        np.testing.assert_allclose(batch[s], integrate(Dmp(samples[s], dmp.y0, dmp.goal, dmp.tau), cfg, times), atol=1e-12)
+        np.testing.assert_allclose(batch[s], integrate(Dmp(samples[s], dmp.y0, dmp.goal, dmp.tau), cfg, times),
+                                   atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(batch[..., 3:], axis=-1), 1.0, atol=1e-12)
     assert not np.allclose(batch[0], batch[1])
 
@@ -266,7 +269,8 @@ def test_demonstrations_give_spd_covariance_with_ridge():
     assert w.shape == (3, 10, 7) and fit.sigma0.shape == (10, 7, 7)
     for b in range(10):
         sample = np.cov(w[:, b, :], rowvar=False)
-        np.testing.assert_allclose(fit.sigma0[b], sample + 0.1 * np.diag(np.diag(sample)) + 1e-8 * np.eye(7), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(fit.sigma0[b], sample + 0.1 * np.diag(np.diag(sample)) + 1e-8 * np.eye(7),
+                                   rtol=1e-12, atol=1e-15)
         np.testing.assert_array_equal(fit.sigma0[b], fit.sigma0[b].T)
         assert np.linalg.eigvalsh(fit.sigma0[b]).min() > 0
         assert np.linalg.matrix_rank(sample) <= 2  # why the ridge is needed

@@ -268,7 +268,10 @@ def _reference_posteriors(log_b, pi, P):
         log_pi, log_P = np.log(pi), np.log(P)
     la, ll = forward_log(log_b, log_pi, log_P)
     lb = _backward_log(log_b, log_P)
-    norm = lambda x: np.exp(x - logsumexp(x, axis=1, keepdims=True))
+
+    def norm(x):
+        return np.exp(x - logsumexp(x, axis=1, keepdims=True))
+
     return norm(la), norm(la + lb), ll
 
 

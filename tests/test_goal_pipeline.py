@@ -105,7 +105,8 @@ def test_rollout_return_equals_offline_return_of_its_clouds(skill, monkeypatch):
     config = pipeline.segmenter.config
     shape = station.object_camera.window.shape
     plane = fit_table_plane(full_xyz, config.segmentation, (480, 640), seed=config.seed)
-    np.testing.assert_array_equal(plane, pipeline.segmenter.table_plane(pipeline.segmenter.GetMyContextFromRoot(context)))
+    segmenter = pipeline.segmenter
+    np.testing.assert_array_equal(plane, segmenter.table_plane(segmenter.GetMyContextFromRoot(context)))
     encoder, goal, X_WO_first = skill.encoder(), [], None
     for xyz, rgb in clouds[:-1]:
         result = process_frame(xyz, rgb, plane, config.segmentation, shape, n_points=config.n_points, seed=config.seed)

@@ -42,7 +42,8 @@ def test_learn_writes_every_artifact(learned, capsys):
     assert [c["episode"] for c in summary["curve"]] == [0, 1]
     # No --exploration-scale: the skill's default, saved as the number used.
     name = Skill.load(shared["skill_dir"]).name
-    assert json.loads((out / "config.json").read_text())["learn"]["exploration_scale"] == load_skill(name).exploration_scale
+    recorded = json.loads((out / "config.json").read_text())
+    assert recorded["learn"]["exploration_scale"] == load_skill(name).exploration_scale
     # config.json records the software the run used and the commit of the checkout it ran from.
     versions = json.loads((out / "config.json").read_text())["versions"]
     assert {k: versions[k] for k in VERSIONED_PACKAGES} == {k: metadata.version(k) for k in VERSIONED_PACKAGES}

@@ -196,7 +196,8 @@ def test_a_resumed_log_purges_the_tensorboard_events_after_its_checkpoint(tmp_pa
     first.row(_curve_row(2, 999.0, 1.0))
     first.close()
     assert len(read_progress(tmp_path / "progress.csv")) == 3
-    assert rows[1]["rollouts_used"] == 6 and rows[1]["failures"] == 3 and rows[1]["failure_reasons"] == "reflex:2 solver:1"
+    assert rows[1]["rollouts_used"] == 6 and rows[1]["failures"] == 3
+    assert rows[1]["failure_reasons"] == "reflex:2 solver:1"
     resumed = RunLog(tmp_path, io.StringIO(), rollouts_per_episode=6)
     resumed.start([{"type": "held_out"}], curve, fresh=False)
     resumed.row(_curve_row(2, 130.25, 100.0))

@@ -76,7 +76,8 @@ def close_rig():
 
 def test_outputs_match_truth_and_label_image(close_rig):
     rig = close_rig
-    assert (rig.segmenter.config.image_height, rig.segmenter.config.image_width) == rig.station.object_camera.window.shape
+    segmenter_config = rig.segmenter.config
+    assert (segmenter_config.image_height, segmenter_config.image_width) == rig.station.object_camera.window.shape
     for seed in (0, 5):
         X_true = rig.reset(seed)
         valid, X_WO, points, box = rig.outputs()
@@ -88,7 +89,8 @@ def test_outputs_match_truth_and_label_image(close_rig):
         # Every point inside the reported box (its own yawed frame).
         c, s = math.cos(box[6]), math.sin(box[6])
         local = (points[:, :2] - box[:2]) @ np.array([[c, -s], [s, c]])
-        assert np.all(np.abs(local) <= box[3:5] / 2 + 1e-9) and np.all(np.abs(points[:, 2] - box[2]) <= box[5] / 2 + 1e-9)
+        assert np.all(np.abs(local) <= box[3:5] / 2 + 1e-9)
+        assert np.all(np.abs(points[:, 2] - box[2]) <= box[5] / 2 + 1e-9)
         assert box[6] == pytest.approx(_yaw(X_WO))
         assert box[5] > 0.3                               # the raised lid reaches 0.32 m
         mask, truth = rig.segmenter.eval_frame(rig.seg_context).segmentation.mask(), rig.object_mask()

@@ -37,7 +37,8 @@ def card():
 
 
 def _cloud(seed):
-    return np.random.default_rng(seed).uniform([-0.15, -0.1, 0.0], [0.15, 0.1, 0.15], size=(pcae.N_POINTS, 3)).astype(np.float32)
+    rng = np.random.default_rng(seed)
+    return rng.uniform([-0.15, -0.1, 0.0], [0.15, 0.1, 0.15], size=(pcae.N_POINTS, 3)).astype(np.float32)
 
 
 # ------------------------------------------------------------------ architecture
@@ -183,7 +184,8 @@ def test_bad_weight_files(tmp_path, random_model):
 
     wrong = dict(tensors, **{"encoder.0.linear.weight": torch.zeros(64, 4)})
     save_file(wrong, str(tmp_path / "wrong_shape.safetensors"), metadata=meta)
-    with pytest.raises(ValueError, match=r"wrong_shape.safetensors: tensor 'encoder.0.linear.weight' has shape \(64, 4\), expected \(64, 3\)"):
+    with pytest.raises(ValueError, match=r"wrong_shape.safetensors: tensor 'encoder.0.linear.weight' "
+                                         r"has shape \(64, 4\), expected \(64, 3\)"):
         pcae.load_pcae(tmp_path / "wrong_shape.safetensors")
 
     extra = dict(tensors, bogus=torch.zeros(3))
@@ -273,7 +275,8 @@ def test_shipped_weights_reconstruct_heldout_clouds(shipped, card):
 
 
 def _lid_code(model, angle_deg, seed, p_WO=(0.0, 0.0, 0.0), yaw_deg=0.0):
-    cloud = shapes.lidded_box_view(np.radians(angle_deg), np.random.default_rng(seed), p_WO=p_WO, yaw_rad=np.radians(yaw_deg))
+    cloud = shapes.lidded_box_view(np.radians(angle_deg), np.random.default_rng(seed), p_WO=p_WO,
+                                   yaw_rad=np.radians(yaw_deg))
     return model.encode_points(cloud)
 
 

@@ -41,7 +41,8 @@ class FrameSource(LeafSystem):
     def __init__(self, clouds, valid):
         super().__init__()
         self._clouds, self._valid = clouds, valid
-        self.DeclareAbstractOutputPort("object_points", lambda: AbstractValue.Make(np.zeros((pcae.N_POINTS, 3))), self._calc_points)
+        self.DeclareAbstractOutputPort("object_points", lambda: AbstractValue.Make(np.zeros((pcae.N_POINTS, 3))),
+                                       self._calc_points)
         self.DeclareVectorOutputPort("valid", 1, self._calc_valid)
 
     def _k(self, context):
@@ -200,7 +201,8 @@ def test_object_frame_latched_at_the_first_valid_frame(model, pca):
     ctx = sim.get_mutable_context()
     diagram.get_input_port(0).FixValue(ctx, X1)
     sim.AdvanceTo(0.15)      # frame 1: the first valid one latches X1
-    np.testing.assert_allclose(_read(feat, ctx)[0], model.encode_points(pcae.cloud_in_object_frame(a, X1.GetAsMatrix4())), atol=1e-6)
+    np.testing.assert_allclose(_read(feat, ctx)[0],
+                               model.encode_points(pcae.cloud_in_object_frame(a, X1.GetAsMatrix4())), atol=1e-6)
     # Moving the perceived pose afterwards does not move the frame of this run.
     diagram.get_input_port(0).FixValue(ctx, RigidTransform([0.1, 0.0, 0.0]))
     sim.AdvanceTo(0.25)

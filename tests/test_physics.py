@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform
 
 from drake_skill.station import limits
 from drake_skill.station.config import scenario_for_skill

@@ -295,7 +295,7 @@ def test_sampling_uses_the_scaled_covariance():
     search = make_policy_search("pi2-es", MEAN0, SIGMA0, n_episodes=5, seed=7)
     rng = np.random.default_rng(7)
     lower = np.linalg.cholesky(SIGMA0)
-    for episode, sigma in enumerate([1.0, 1.0, 0.8]):
+    for sigma in [1.0, 1.0, 0.8]:
         z = rng.standard_normal((3, 2, 2))
         expected = search.mean + math.sqrt(sigma) * np.einsum(
             "bij,nbj->nbi", lower, z)

@@ -238,7 +238,8 @@ def test_footprint_from_an_l_shape(yaw):
 def test_resampling_is_exact_and_deterministic():
     rng = np.random.default_rng(1)
     many, few = rng.normal(size=(5000, 3)), rng.normal(size=(100, 3))
-    a, b, c = resample_points(many, 2048, seed=4), resample_points(many, 2048, seed=4), resample_points(many, 2048, seed=5)
+    a, b = resample_points(many, 2048, seed=4), resample_points(many, 2048, seed=4)
+    c = resample_points(many, 2048, seed=5)
     assert a.shape == (2048, 3) and np.array_equal(a, b) and not np.array_equal(a, c)
     assert np.unique(a, axis=0).shape[0] == 2048                      # without replacement
     assert np.isin(a[:, 0], many[:, 0]).all()
@@ -259,7 +260,8 @@ def test_resampling_is_exact_and_deterministic():
 def test_bad_arrays_are_named():
     xyz, rgb, _ = _synthetic_scene()
     shape = (60, 80)
-    with pytest.raises(ValueError, match=r"xyz: expected shape \(4800, 3\) for an organised 60x80 cloud, got \(4800, 2\)"):
+    with pytest.raises(ValueError,
+                       match=r"xyz: expected shape \(4800, 3\) for an organised 60x80 cloud, got \(4800, 2\)"):
         check_organised_cloud(xyz[:, :2], rgb, shape)
     with pytest.raises(ValueError, match="xyz: expected a float array"):
         check_organised_cloud(xyz.astype(int), rgb, shape)

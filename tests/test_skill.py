@@ -106,7 +106,8 @@ def test_hold_invalid_frames():
 
 
 def _run_pipeline(skill, plan_for, seed, duration):
-    """Station + plan + segmenter -> featurizer -> reward in one diagram; returns the reward system's verdict and return."""
+    """Station + plan + segmenter -> featurizer -> reward in one diagram; returns the reward system's
+    verdict and return."""
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
 

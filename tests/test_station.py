@@ -192,7 +192,8 @@ def test_config_yaml_round_trip(tmp_path):
     path = tmp_path / "scenario.yaml"
     path.write_text("plant:\n  time_step: 0.001\nobject:\n  x: 0.68\ncamera:\n  fps: 5.0\n")
     config = load_station_config(path)
-    assert config.object.joint == "lid_hinge" and config.object.x == 0.68 and config.time_step == 0.001 and config.camera.fps == 5.0
+    assert config.object.joint == "lid_hinge" and config.object.x == 0.68
+    assert config.time_step == 0.001 and config.camera.fps == 5.0
     assert config.camera.width == StationConfig().camera.width
     # Keys left out keep their defaults, including the plant's contact settings.
     assert config.plant.discrete_contact_approximation == "sap"

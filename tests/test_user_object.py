@@ -24,21 +24,27 @@ SDF = """<?xml version="1.0"?>
       <inertial><pose>0 0 0.045 0 0 0</pose><mass>1.5</mass>
         <inertia><ixx>0.008</ixx><iyy>0.004</iyy><izz>0.01</izz><ixy>0</ixy><ixz>0</ixz><iyz>0</iyz></inertia>
       </inertial>
-      <visual name="tray_visual"><pose>0 0 0.045 0 0 0</pose><geometry><box><size>0.16 0.24 0.09</size></box></geometry>
+      <visual name="tray_visual"><pose>0 0 0.045 0 0 0</pose>
+        <geometry><box><size>0.16 0.24 0.09</size></box></geometry>
         <material><diffuse>0.80 0.12 0.10 1</diffuse></material></visual>
-      <collision name="tray_collision"><pose>0 0 0.045 0 0 0</pose><geometry><box><size>0.16 0.24 0.09</size></box></geometry></collision>
+      <collision name="tray_collision"><pose>0 0 0.045 0 0 0</pose>
+        <geometry><box><size>0.16 0.24 0.09</size></box></geometry></collision>
     </link>
     <link name="plate">
       <pose relative_to="plate_slide"/>
       <inertial><pose>0 0 0.006 0 0 0</pose><mass>0.3</mass>
         <inertia><ixx>0.0015</ixx><iyy>0.0007</iyy><izz>0.002</izz><ixy>0</ixy><ixz>0</ixz><iyz>0</iyz></inertia>
       </inertial>
-      <visual name="plate_visual"><pose>0 0 0.006 0 0 0</pose><geometry><box><size>0.16 0.24 0.012</size></box></geometry>
+      <visual name="plate_visual"><pose>0 0 0.006 0 0 0</pose>
+        <geometry><box><size>0.16 0.24 0.012</size></box></geometry>
         <material><diffuse>0.80 0.12 0.10 1</diffuse></material></visual>
-      <collision name="plate_collision"><pose>0 0 0.006 0 0 0</pose><geometry><box><size>0.16 0.24 0.012</size></box></geometry></collision>
-      <visual name="ridge_visual"><pose>0 -0.09 0.027 0 0 0</pose><geometry><box><size>0.10 0.02 0.03</size></box></geometry>
+      <collision name="plate_collision"><pose>0 0 0.006 0 0 0</pose>
+        <geometry><box><size>0.16 0.24 0.012</size></box></geometry></collision>
+      <visual name="ridge_visual"><pose>0 -0.09 0.027 0 0 0</pose>
+        <geometry><box><size>0.10 0.02 0.03</size></box></geometry>
         <material><diffuse>0.80 0.12 0.10 1</diffuse></material></visual>
-      <collision name="ridge_collision"><pose>0 -0.09 0.027 0 0 0</pose><geometry><box><size>0.10 0.02 0.03</size></box></geometry></collision>
+      <collision name="ridge_collision"><pose>0 -0.09 0.027 0 0 0</pose>
+        <geometry><box><size>0.10 0.02 0.03</size></box></geometry></collision>
     </link>
     <joint name="plate_slide" type="prismatic">
       <pose relative_to="tray">0 0 0.09 0 0 0</pose>

@@ -92,7 +92,8 @@ def main(argv=None) -> int:
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--seeds", type=int, default=10)
     parser.add_argument("--reflex", action="store_true")
-    parser.add_argument("--skills", default=None, help="comma-separated skills (default: every shipped skill with keyframes)")
+    parser.add_argument("--skills", default=None,
+                        help="comma-separated skills (default: every shipped skill with keyframes)")
     args = parser.parse_args(argv)
     logging.getLogger("drake").setLevel(logging.ERROR)
 

@@ -275,8 +275,11 @@ HAND_BASE_Z = 0.0045
 
 
 def panda_hand() -> str:
+    hand_inertial = _inertial(0.73, (-0.01, 0.0, 0.03), HAND_INERTIA)
+    hand_geometry = (_box("hand_body", (0, 0, 0.03), (0.055, 0.20, 0.06), WHITE)
+                     + _box("hand_base", (0, 0, HAND_BASE_Z), (0.06, 0.07, 0.01), DARK, collision=False))
     body = f"""    <link name="panda_hand">
-{_inertial(0.73, (-0.01, 0.0, 0.03), HAND_INERTIA)}{_box("hand_body", (0, 0, 0.03), (0.055, 0.20, 0.06), WHITE)}{_box("hand_base", (0, 0, HAND_BASE_Z), (0.06, 0.07, 0.01), DARK, collision=False)}    </link>
+{hand_inertial}{hand_geometry}    </link>
     <frame name="panda_tcp" attached_to="panda_hand">
       <pose relative_to="panda_hand">0 0 {TCP_Z} 0 0 0</pose>
     </frame>
@@ -285,9 +288,11 @@ def panda_hand() -> str:
         cx = 0.0
         cy = sign * FINGER_SIZE[1] / 2
         cz = FINGER_SIZE[2] / 2
+        finger_inertial = _inertial(0.015, (0, cy, cz), (2.375e-06, 0.0, 0.0, 2.375e-06, 0.0, 7.5e-07))
+        finger_box = _box(f"{side}finger", (cx, cy, cz), FINGER_SIZE, DARK)
         body += f"""    <link name="panda_{side}finger">
       <pose relative_to="panda_finger_joint_{side}"/>
-{_inertial(0.015, (0, cy, cz), (2.375e-06, 0.0, 0.0, 2.375e-06, 0.0, 7.5e-07))}{_box(f"{side}finger", (cx, cy, cz), FINGER_SIZE, DARK)}    </link>
+{finger_inertial}{finger_box}    </link>
     <joint name="panda_finger_joint_{side}" type="prismatic">
       <pose relative_to="panda_hand">0 0 {FINGER_Z} 0 0 0</pose>
       <parent>panda_hand</parent>
@@ -369,11 +374,13 @@ def drawer() -> str:
     cx, cy, cz = CABINET
     dx, dy, dz = DRAWER
     front = -dx / 2 - 0.005
+    drawer_geometry = (_box("drawer_body", (0, 0, dz / 2), DRAWER, BLUE)
+                       + _box("drawer_front", (front, 0, dz / 2), (0.01, dy + 0.02, dz + 0.02), BLUE))
     body = f"""    <link name="cabinet">
 {_inertial(8.0, (0, 0, cz / 2), _box_inertia(8.0, CABINET))}{_box("cabinet", (0, 0, cz / 2), CABINET, BLUE)}    </link>
     <link name="drawer">
       <pose relative_to="drawer_slide"/>
-{_inertial(1.0, (0, 0, dz / 2), _box_inertia(1.0, DRAWER))}{_box("drawer_body", (0, 0, dz / 2), DRAWER, BLUE)}{_box("drawer_front", (front, 0, dz / 2), (0.01, dy + 0.02, dz + 0.02), BLUE)}"""
+{_inertial(1.0, (0, 0, dz / 2), _box_inertia(1.0, DRAWER))}{drawer_geometry}"""
     for i, s in enumerate((1, -1)):
         body += _box(f"standoff{i}", (front - HANDLE_STANDOFF / 2, s * (HANDLE_LENGTH / 2 - 0.01), dz / 2),
                      (HANDLE_STANDOFF, 0.012, 0.012), BLUE)
@@ -410,11 +417,14 @@ def slider() -> str:
     bx, by, bz = SLIDER_BASE
     lx, ly, lz = SLIDER_LID
     rx, ry, rz = SLIDER_RIDGE
+    base_box = _box("base", (0, 0, bz / 2), SLIDER_BASE, GREEN)
+    lid_geometry = (_box("lid", (0, 0, lz / 2), SLIDER_LID, GREEN)
+                    + _box("ridge", (0, SLIDER_RIDGE_Y, lz + rz / 2), SLIDER_RIDGE, GREEN))
     body = f"""    <link name="slider_base">
-{_inertial(2.0, (0, 0, bz / 2), _box_inertia(2.0, SLIDER_BASE))}{_box("base", (0, 0, bz / 2), SLIDER_BASE, GREEN)}    </link>
+{_inertial(2.0, (0, 0, bz / 2), _box_inertia(2.0, SLIDER_BASE))}{base_box}    </link>
     <link name="slider_lid">
       <pose relative_to="lid_slide"/>
-{_inertial(0.4, (0, 0, lz / 2), _box_inertia(0.4, SLIDER_LID))}{_box("lid", (0, 0, lz / 2), SLIDER_LID, GREEN)}{_box("ridge", (0, SLIDER_RIDGE_Y, lz + rz / 2), SLIDER_RIDGE, GREEN)}    </link>
+{_inertial(0.4, (0, 0, lz / 2), _box_inertia(0.4, SLIDER_LID))}{lid_geometry}    </link>
     <joint name="lid_slide" type="prismatic">
       <pose relative_to="slider_base">{_pose((0.0, 0.0, bz))}</pose>
       <parent>slider_base</parent>

@@ -24,7 +24,8 @@ from pathlib import Path
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter,
                                      allow_abbrev=False,
-                                     epilog="Every other option is drake-skill evaluate's (drake-skill evaluate --help).")
+                                     epilog="Every other option is drake-skill evaluate's "
+                                            "(drake-skill evaluate --help).")
     parser.add_argument("skill_dir", type=Path, help="a fitted skill folder (drake-skill fit)")
     parser.add_argument("--perceived", action="store_true", help=argparse.SUPPRESS)   # older scripts: now the default
     args, rest = parser.parse_known_args(argv)

@@ -35,7 +35,8 @@ data recipe, seeds, sizes, epochs, wall time, held-out Chamfer and EMD, input
 normalisation).
 
 Usage: ``python tools/train_pcae.py --out models/`` (defaults reproduce the
-shipped model; about 20 minutes of training on 2 CPU threads shared with other work, 12 alone, plus 2-3 minutes of evaluation). ``--smoke`` runs a tiny
+shipped model; about 20 minutes of training on 2 CPU threads shared with other
+work, 12 alone, plus 2-3 minutes of evaluation). ``--smoke`` runs a tiny
 configuration in about a minute.
 """
 
@@ -68,9 +69,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--clouds-per-epoch", type=int, default=2000)
     p.add_argument("--batch-size", type=int, default=16)
     p.add_argument("--lr", type=float, default=5e-4)
-    p.add_argument("--weight-decay", type=float, default=0.0, help="L2 on Linear weights (Adam-coupled); see the docstring")
+    p.add_argument("--weight-decay", type=float, default=0.0,
+                   help="L2 on Linear weights (Adam-coupled); see the docstring")
     p.add_argument("--heldout", type=int, default=256, help="held-out clouds for Chamfer")
-    p.add_argument("--emd-clouds", type=int, default=64, help="held-out clouds (first ones) for exact EMD on all 2048 points")
+    p.add_argument("--emd-clouds", type=int, default=64,
+                   help="held-out clouds (first ones) for exact EMD on all 2048 points")
     p.add_argument("--val", type=int, default=64, help="held-out clouds evaluated after every epoch")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--smoke", action="store_true", help="tiny run (about a minute) into build/pcae_smoke")
@@ -193,7 +196,8 @@ def main(argv=None) -> int:
         order = torch.randperm(len(x_all), generator=g)
         model.train()
         losses = []
-        bar = tqdm(range(0, len(order), args.batch_size), desc=f"epoch {epoch + 1}/{args.epochs}", unit="batch", mininterval=10)
+        bar = tqdm(range(0, len(order), args.batch_size), desc=f"epoch {epoch + 1}/{args.epochs}", unit="batch",
+                   mininterval=10)
         for i in bar:
             x = x_all[order[i : i + args.batch_size]]
             rec, _ = model(x)
@@ -206,10 +210,12 @@ def main(argv=None) -> int:
         bar.close()
         val_cd = float(chamfer_m2(model, val).mean())
         epoch_s = time.perf_counter() - t0
-        history.append({"epoch": epoch + 1, "train_chamfer_norm": float(np.mean(losses)), "val_chamfer_m2": val_cd, "seconds": epoch_s, "datagen_seconds": t_gen})
+        history.append({"epoch": epoch + 1, "train_chamfer_norm": float(np.mean(losses)), "val_chamfer_m2": val_cd,
+                        "seconds": epoch_s, "datagen_seconds": t_gen})
         wall_before += epoch_s
         save_checkpoint(ckpt, model, opt, epoch + 1, history, wall_before, rhash)
-        print(f"epoch {epoch + 1}: train Chamfer {np.mean(losses):.5f} (normalised), held-out {val_cd * 1e6:.1f} mm^2, {epoch_s:.0f} s", flush=True)
+        print(f"epoch {epoch + 1}: train Chamfer {np.mean(losses):.5f} (normalised), "
+              f"held-out {val_cd * 1e6:.1f} mm^2, {epoch_s:.0f} s", flush=True)
 
     # ---- final evaluation on the held-out set
     model.eval()
@@ -217,9 +223,11 @@ def main(argv=None) -> int:
     cd = chamfer_m2(model, heldout)
     emd = emd_m(model, heldout[: args.emd_clouds])
     eval_s = time.perf_counter() - t0
-    per_kind = {k: float(cd[[i for i, kk in enumerate(heldout_kinds) if kk == k]].mean()) for k in sorted(set(heldout_kinds))}
+    per_kind = {k: float(cd[[i for i, kk in enumerate(heldout_kinds) if kk == k]].mean())
+                for k in sorted(set(heldout_kinds))}
     card = {
-        "model": "PCAE (Achlioptas et al. 2017; thesis 3.5): encoder per-point MLP 3-64-128-128-256-128 (Linear+BatchNorm+ReLU), max-pool -> 128; decoder FC 128-256-256-6144 (ReLU except output)",
+        "model": "PCAE (Achlioptas et al. 2017; thesis 3.5): encoder per-point MLP 3-64-128-128-256-128 "
+                 "(Linear+BatchNorm+ReLU), max-pool -> 128; decoder FC 128-256-256-6144 (ReLU except output)",
         "weights": "pcae.safetensors",
         "n_points": pcae.N_POINTS,
         "code_size": pcae.CODE_SIZE,
@@ -227,7 +235,8 @@ def main(argv=None) -> int:
             "frame": "world frame, z up (metres)",
             "centre": "centre of the cloud's axis-aligned bounding box",
             "scale_m": pcae.NORMALIZATION_SCALE_M,
-            "formula": "x_norm = (p - 0.5 (min p + max p)) / scale_m; fixed scale, no per-cloud scaling, so object size and state (lid, drawer) stay in the input",
+            "formula": "x_norm = (p - 0.5 (min p + max p)) / scale_m; fixed scale, no per-cloud scaling, "
+                       "so object size and state (lid, drawer) stay in the input",
         },
         "data": {
             "generator": "drake_skill.perception.shapes.generate_clouds (open3d RaycastingScene)",
@@ -236,7 +245,9 @@ def main(argv=None) -> int:
             "view": dataclasses.asdict(cfg.view),
             "table_cut_probability": cfg.table_cut_probability,
             "table_cut_max_m": cfg.table_cut_max_m,
-            "train_stream": f"cloud i uses np.random.default_rng([{args.seed}, i]); epoch e uses clouds e*{args.clouds_per_epoch} .. (e+1)*{args.clouds_per_epoch}-1 (every cloud seen once)",
+            "train_stream": f"cloud i uses np.random.default_rng([{args.seed}, i]); "
+                            f"epoch e uses clouds e*{args.clouds_per_epoch} .. (e+1)*{args.clouds_per_epoch}-1 "
+                            "(every cloud seen once)",
             "train_clouds_total": args.epochs * args.clouds_per_epoch,
             "heldout_clouds": args.heldout,
             "heldout_seed": args.heldout_seed,
@@ -245,7 +256,9 @@ def main(argv=None) -> int:
             **recipe(args),
             "loss": "Chamfer (mean squared nearest-neighbour distance, both directions) on normalised clouds",
             "optimizer": "Adam; L2 weight decay (weight_decay, Adam-coupled) on Linear weight matrices only",
-            "weight_decay_note": "thesis 3.5 lists 1e-3, but Achlioptas et al.'s reference code builds its layers with regularizer=None, so no decay is applied there; 1e-3 stalled training on this budget (see tools/train_pcae.py)",
+            "weight_decay_note": "thesis 3.5 lists 1e-3, but Achlioptas et al.'s reference code builds its layers "
+                                 "with regularizer=None, so no decay is applied there; 1e-3 stalled training "
+                                 "on this budget (see tools/train_pcae.py)",
             "wall_time_s": wall_before,
             "history": history,
             "torch": torch.__version__,
@@ -257,11 +270,13 @@ def main(argv=None) -> int:
             "chamfer_m2_p90": float(np.quantile(cd, 0.9)),
             "chamfer_m2_per_kind": per_kind,
             "chamfer_bound_m2": float(1.5 * cd.mean()),
-            "chamfer_bound_note": "tests require the mean Chamfer of freshly generated held-out clouds to be below this (1.5 x held-out mean)",
+            "chamfer_bound_note": "tests require the mean Chamfer of freshly generated held-out clouds "
+                                  "to be below this (1.5 x held-out mean)",
             "emd_m_mean": float(emd.mean()),
             "emd_m_median": float(np.median(emd)),
             "emd_clouds": int(len(emd)),
-            "emd_note": "exact EMD (scipy linear_sum_assignment) on all 2048 points, mean matched distance (thesis Eq. 3.32 / N), first emd_clouds held-out clouds",
+            "emd_note": "exact EMD (scipy linear_sum_assignment) on all 2048 points, "
+                        "mean matched distance (thesis Eq. 3.32 / N), first emd_clouds held-out clouds",
             "eval_seconds": eval_s,
         },
     }

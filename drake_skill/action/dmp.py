@@ -317,7 +317,8 @@ def validate_demonstration(times, poses, name: str = "demonstration") -> tuple[n
     if np.any(dt <= 0):
         k = int(np.argmax(dt <= 0))
         raise ValueError(
-            f"{name} times: expected strictly increasing timestamps, got t[{k}]={float(t[k])!r} >= t[{k + 1}]={float(t[k + 1])!r}"
+            f"{name} times: expected strictly increasing timestamps, "
+            f"got t[{k}]={float(t[k])!r} >= t[{k + 1}]={float(t[k + 1])!r}"
         )
     y[:, 3:] = as_quaternions(y[:, 3:], name=f"{name} poses[:, 3:7]", tol=UNIT_NORM_TOLERANCE)
     return t, y
@@ -758,7 +759,8 @@ def integrate(
     d = config.weight_dim
     w = _check_weights(dmp.weights if weights is None else weights, dmp.n_basis, d)
     if dmp.weights.shape[1] != d:
-        raise ValueError(f"dmp.weights: has {dmp.weights.shape[1]} columns but config.quaternion={config.quaternion!r} needs {d}")
+        raise ValueError(f"dmp.weights: has {dmp.weights.shape[1]} columns "
+                         f"but config.quaternion={config.quaternion!r} needs {d}")
     t_max = dmp.tau if times is None else None
     t = _validate_times(times) if times is not None else None
     _check_steps(t_max if t is None else float(t[-1]), config.dt)

@@ -15,8 +15,6 @@ import argparse
 import json
 import time
 
-import numpy as np
-
 
 def _rtf(with_camera: bool, duration: float, seed: int) -> float:
     from drake_skill.station.scripted import scripted_plan

@@ -47,7 +47,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
     parser.description = __doc__
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
-    parser.add_argument("--skill-dir", type=Path, required=True, help="a fitted skill's folder (drake-skill fit / learn)")
+    parser.add_argument("--skill-dir", type=Path, required=True,
+                        help="a fitted skill's folder (drake-skill fit / learn)")
     parser.add_argument("--poses", type=int, default=10, help="held-out object poses (default 10)")
     parser.add_argument("--seed0", type=int, default=HELD_OUT_SEED0,
                         help=f"seed of the first pose (default {HELD_OUT_SEED0}, as drake-skill learn)")
@@ -66,7 +67,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--exploration-scale", type=float, default=None, metavar="S",
                         help=f"with --explore: sample from S x Sigma_0 (default: the skill's, as "
                              f"drake-skill learn: {exploration_scales_text()})")
-    parser.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE", help="scenario YAML (StationConfig; default: the skill's scenario)")
+    parser.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE",
+                        help="scenario YAML (StationConfig; default: the skill's scenario)")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON report (default SKILL/evaluation.json); the placement plot goes beside it "
                              "with the suffix .png")

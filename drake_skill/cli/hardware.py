@@ -52,8 +52,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     actions.required = True
     run_p = actions.add_parser("run", help="the skill's greedy policy (or --episodes: learning) on the robot",
                                description="Executes a skill on the robot with the simulation's rollout runner.")
-    run_p.add_argument("--skill-dir", type=Path, required=True, help="a fitted skill's folder (drake-skill fit / learn)")
-    run_p.add_argument("--rollouts", type=int, default=1, help="greedy rollouts (default 1); per episode with --episodes")
+    run_p.add_argument("--skill-dir", type=Path, required=True,
+                       help="a fitted skill's folder (drake-skill fit / learn)")
+    run_p.add_argument("--rollouts", type=int, default=1,
+                       help="greedy rollouts (default 1); per episode with --episodes")
     run_p.add_argument("--seed0", type=int, default=0, help="object pose seed of the first rollout (default 0)")
     run_p.add_argument("--episodes", type=int, default=0, help="policy-search episodes (default 0: greedy only)")
     run_p.add_argument("--ground-truth-pose", action="store_true",
@@ -102,7 +104,8 @@ def _run(args) -> int:
     if args.episodes < 0:
         raise ValueError(f"--episodes must be 0 (greedy only) or more, got {args.episodes}")
     if not args.skill_dir.is_dir():
-        raise NotADirectoryError(f"--skill-dir {args.skill_dir}: not a folder; give a skill folder (drake-skill fit --out)")
+        raise NotADirectoryError(f"--skill-dir {args.skill_dir}: not a folder; "
+                                 "give a skill folder (drake-skill fit --out)")
     skill = Skill.load(args.skill_dir)
     config = load_config(args.config, args.lcm_url, skill.name)
     camera = config.station.enable_camera

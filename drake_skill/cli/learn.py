@@ -95,7 +95,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument("--no-replay", action="store_true", help="do not write the Meshcat HTML replays")
     run.add_argument("--ground-truth-pose", action="store_true",
                      help="object frame from the simulator's ground truth instead of the segmenter")
-    run.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE", help="scenario YAML (StationConfig; default: the skill's scenario)")
+    run.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE",
+                     help="scenario YAML (StationConfig; default: the skill's scenario)")
     run.add_argument("--quiet", action="store_true", help="no progress bars")
 
 

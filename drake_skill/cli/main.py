@@ -34,7 +34,8 @@ import yaml
 from drake_skill.common import IkWarningCounter
 
 #: Command modules in the order ``--help`` lists them (missing ones are skipped).
-COMMANDS = ["skills", "station_demo", "demos", "fit", "learn", "evaluate", "experiment", "bench", "hardware", "sim_robot"]
+COMMANDS = ["skills", "station_demo", "demos", "fit", "learn", "evaluate", "experiment", "bench", "hardware",
+            "sim_robot"]
 
 DESCRIPTION = "Robot skill learning from very few demonstrations, as a Drake diagram."
 EPILOG = ("Run 'drake-skill COMMAND --help' for a command's options. User errors print one line "

@@ -112,7 +112,8 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
                    leave=False, file=sys.stderr)
         try:
             with make_pool(spec, workers, ray_address) as pool:
-                policy, _ = evaluate_greedy(pool, skill.dmps[index].weights, seeds, lambda i, r: bar.update(1))
+                policy, _ = evaluate_greedy(pool, skill.dmps[index].weights, seeds,
+                                            lambda i, r, bar=bar: bar.update(1))
         finally:
             bar.close()
         policy["initial"] = index == skill.initial_index
@@ -191,7 +192,8 @@ def exploration_table(report: dict[str, Any]) -> str:
         f"{report['exploration_scale']:g} x Sigma_0 (seeds {report['seeds'][0]}.."
         f"{report['seeds'][-1]}), {report['wall_s']} s",
         f"  return: min {s['min']:.1f}, median {s['median']:.1f}, max {s['max']:.1f}, std {s['std']:.1f}",
-        f"  success {report['success_rate'] * 100:.0f}%, final state {_final_state_text(report['final_object_state'])}, "
+        f"  success {report['success_rate'] * 100:.0f}%, "
+        f"final state {_final_state_text(report['final_object_state'])}, "
         f"failures {_failures_text(report['failures'])}"])
 
 

@@ -75,8 +75,8 @@ from drake_skill.learning.plots import plot_learning_curve
 from drake_skill.learning.policy_search import PER_STEP_METHODS, make_policy_search, policy_search_from_state
 from drake_skill.learning.runlog import RunLog, software_versions
 
-__all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "REWARDS", "LearnConfig", "LearnOutcome", "LearningRun", "RunState", "episode_rewards",
-           "frame_meshcat_camera", "learn", "pose_seed"]
+__all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "REWARDS", "LearnConfig", "LearnOutcome", "LearningRun", "RunState",
+           "episode_rewards", "frame_meshcat_camera", "learn", "pose_seed"]
 
 #: What a learning run writes into its output directory (and ``tensorboard/`` where the
 #: ``tensorboard`` package is installed).

@@ -34,8 +34,9 @@ def plot_learning_curve(curve: list[dict], path, title: str = "") -> Path:
     ax_r.plot(episodes, [c["greedy_return"] for c in curve], "o-", label="greedy return")
     learned = [c for c in curve if c.get("mean_return") is not None]
     if learned:
-        ax_r.plot([c["episode"] for c in learned], [c["mean_return"] for c in learned], "s--", label="mean rollout return")
-        ax_r.plot([c["episode"] for c in learned], [c["best_return"] for c in learned], "^:", label="best rollout return")
+        learned_episodes = [c["episode"] for c in learned]
+        ax_r.plot(learned_episodes, [c["mean_return"] for c in learned], "s--", label="mean rollout return")
+        ax_r.plot(learned_episodes, [c["best_return"] for c in learned], "^:", label="best rollout return")
     ax_r.set_xlabel("episode (update)")
     ax_r.set_ylabel("learned return R(G)")
     ax_r.set_xticks(episodes)

@@ -280,7 +280,7 @@ class ProcessPool(_Pool):
         return results  # type: ignore[return-value]
 
     def close(self) -> None:
-        for process, connection in self._workers:
+        for _process, connection in self._workers:
             try:
                 connection.send(None)
             except (BrokenPipeError, OSError):

@@ -311,7 +311,8 @@ def chamfer_distance(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     the matched pairs' distances (the same gradient as the min, almost everywhere).
     """
     if a.ndim != 3 or b.ndim != 3 or a.shape[-1] != 3 or b.shape[-1] != 3 or a.shape[0] != b.shape[0]:
-        raise ValueError(f"chamfer_distance: expected (B, N, 3) and (B, M, 3), got {tuple(a.shape)} and {tuple(b.shape)}")
+        raise ValueError(f"chamfer_distance: expected (B, N, 3) and (B, M, 3), "
+                         f"got {tuple(a.shape)} and {tuple(b.shape)}")
     i_ab = _nearest(a, b)  # (B, N) index into b
     i_ba = _nearest(b, a)  # (B, M) index into a
     b_near = torch.gather(b, 1, i_ab[..., None].expand(-1, -1, 3))
@@ -333,7 +334,8 @@ def earth_movers_distance(a: np.ndarray, b: np.ndarray, n_subsample: int | None 
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != 3 or a.shape != b.shape:
-        raise ValueError(f"earth_movers_distance: expected two (N, 3) clouds of equal size, got {a.shape} and {b.shape}")
+        raise ValueError(f"earth_movers_distance: expected two (N, 3) clouds of equal size, "
+                         f"got {a.shape} and {b.shape}")
     if n_subsample is not None and n_subsample < a.shape[0]:
         rng = np.random.default_rng(seed)
         a = a[rng.choice(a.shape[0], n_subsample, replace=False)]

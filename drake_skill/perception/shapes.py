@@ -135,7 +135,8 @@ _UNIT_CACHE: dict[str, Mesh] = {}
 
 
 def _unit(kind: str) -> Mesh:
-    """Unit primitives centred at the origin: box 1x1x1, cylinder r=0.5 h=1 along z, sphere r=0.5, cone r=0.5 h=1 (base z=-0.5)."""
+    """Unit primitives centred at the origin: box 1x1x1, cylinder r=0.5 h=1 along z, sphere r=0.5,
+    cone r=0.5 h=1 (base z=-0.5)."""
     if kind not in _UNIT_CACHE:
         import open3d as o3d
 
@@ -173,7 +174,8 @@ def torus(radius: float, tube: float, center=(0.0, 0.0, 0.0), R: np.ndarray | No
     """A torus around its z axis (ring radius, tube radius in m)."""
     import open3d as o3d
 
-    m = o3d.geometry.TriangleMesh.create_torus(torus_radius=radius, tube_radius=tube, radial_resolution=24, tubular_resolution=12)
+    m = o3d.geometry.TriangleMesh.create_torus(torus_radius=radius, tube_radius=tube,
+                                               radial_resolution=24, tubular_resolution=12)
     v = np.asarray(m.vertices, dtype=np.float64)
     if R is not None:
         v = v @ np.asarray(R).T
@@ -339,7 +341,8 @@ def random_shape(rng: np.random.Generator, kind: str | None = None) -> tuple[Mes
             mesh = primitive("cylinder", (r, r, rng.uniform(0.004, 0.025)))
         else:  # pole / stick
             r = rng.uniform(0.01, 0.04)
-            mesh = primitive("cylinder", (r, r, rng.uniform(0.15, 0.5)), R=_rot_x(math.pi / 2) if rng.random() < 0.5 else None)
+            mesh = primitive("cylinder", (r, r, rng.uniform(0.15, 0.5)),
+                             R=_rot_x(math.pi / 2) if rng.random() < 0.5 else None)
     elif kind == "tray":
         mesh = _tray(rng)
     else:  # torus
@@ -365,7 +368,8 @@ def random_camera_pose(rng: np.random.Generator, target, view: ViewConfig | None
     return look_at(eye, aim, math.radians(rng.normal(0.0, view.roll_deg)))
 
 
-def render_depth_points(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, camera: DepthCameraConfig | None = None, noise: bool = True) -> np.ndarray:
+def render_depth_points(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator,
+                        camera: DepthCameraConfig | None = None, noise: bool = True) -> np.ndarray:
     """Points (M, 3) in W that the depth camera at X_WC sees on ``mesh`` (one per pixel, see module docstring)."""
     import open3d as o3d
 
@@ -403,7 +407,8 @@ def render_depth_points(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, 
         n_W = hit["primitive_normals"].numpy().astype(np.float64)
         cos_inc = np.abs(np.sum(n_W * d_W, axis=1)) / np.linalg.norm(d_W, axis=1)
         inc = np.degrees(np.arccos(np.clip(cos_inc, 0.0, 1.0)))
-        p_miss = np.clip((inc - camera.grazing_start_deg) / (camera.max_incidence_deg - camera.grazing_start_deg), 0.0, 1.0)
+        p_miss = np.clip((inc - camera.grazing_start_deg) / (camera.max_incidence_deg - camera.grazing_start_deg),
+                         0.0, 1.0)
         ok &= rng.random(z.shape) >= np.maximum(p_miss, camera.dropout)
     uu, ww, z = uu[ok], ww[ok], z[ok]
     if noise and z.size:
@@ -419,8 +424,10 @@ def render_depth_points(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, 
     return p_C @ R_WC.T + p_WC
 
 
-def partial_view_cloud(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, config: CloudConfig | None = None, noise: bool = True) -> np.ndarray:
-    """Rendered, table-cut and resampled cloud (n_points, 3) in W; raises ValueError if the view has < min_points points."""
+def partial_view_cloud(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator,
+                       config: CloudConfig | None = None, noise: bool = True) -> np.ndarray:
+    """Rendered, table-cut and resampled cloud (n_points, 3) in W; raises ValueError if the view
+    has < min_points points."""
     config = config if config is not None else CloudConfig()
     pts = render_depth_points(mesh, X_WC, rng, config.camera, noise)
     if noise and rng.random() < config.table_cut_probability:
@@ -432,7 +439,8 @@ def partial_view_cloud(mesh: Mesh, X_WC: np.ndarray, rng: np.random.Generator, c
     return resample_points(pts, config.n_points, rng).astype(np.float32)
 
 
-def random_cloud(rng: np.random.Generator, config: CloudConfig | None = None, kind: str | None = None) -> tuple[np.ndarray, dict]:
+def random_cloud(rng: np.random.Generator, config: CloudConfig | None = None,
+                 kind: str | None = None) -> tuple[np.ndarray, dict]:
     """One random shape seen from one random viewpoint: ((n_points, 3) float32 in W, info)."""
     config = config if config is not None else CloudConfig()
     for _ in range(20):
@@ -446,7 +454,8 @@ def random_cloud(rng: np.random.Generator, config: CloudConfig | None = None, ki
     raise RuntimeError("random_cloud: 20 draws in a row gave too few visible points; check CloudConfig")
 
 
-def generate_clouds(n: int, seed: int, config: CloudConfig | None = None, start: int = 0, progress: bool = False) -> tuple[np.ndarray, list[str]]:
+def generate_clouds(n: int, seed: int, config: CloudConfig | None = None, start: int = 0,
+                    progress: bool = False) -> tuple[np.ndarray, list[str]]:
     """Clouds ``start .. start+n-1`` of the dataset with this seed: ((n, n_points, 3) float32, kinds).
 
     Sample i uses ``np.random.default_rng([seed, i])`` only, so slices agree with a full run.
@@ -468,7 +477,9 @@ def generate_clouds(n: int, seed: int, config: CloudConfig | None = None, start:
     return out, kinds
 
 
-def lidded_box_view(lid_angle_rad: float, rng: np.random.Generator, size=(0.20, 0.30, 0.15), p_WO=(0.0, 0.0, 0.0), yaw_rad: float = 0.0, camera_position=(1.3, 0.0, 0.7), config: CloudConfig | None = None, noise: bool = True) -> np.ndarray:
+def lidded_box_view(lid_angle_rad: float, rng: np.random.Generator, size=(0.20, 0.30, 0.15),
+                    p_WO=(0.0, 0.0, 0.0), yaw_rad: float = 0.0, camera_position=(1.3, 0.0, 0.7),
+                    config: CloudConfig | None = None, noise: bool = True) -> np.ndarray:
     """The thesis' lidded box seen by a fixed camera: cloud (n_points, 3) in W.
 
     The box (depth x 0.20, width y 0.30, height z 0.15 m by default; front

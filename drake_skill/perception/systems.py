@@ -142,7 +142,6 @@ from drake_skill.perception.pcae import (CODE_SIZE, N_POINTS, PointCloudAutoenco
                                          cloud_in_object_frame, load_pcae)
 from drake_skill.perception.segmentation import (
     BOUNDING_BOX_SIZE,
-    N_POINTS,
     SegmentationConfig,
     fit_table_plane,
     process_frame,
@@ -456,7 +455,8 @@ class PcaeFeaturizerConfig:
 class PcaeFeaturizer(LeafSystem):
     """Encodes the object cloud at a fixed rate; see the module docstring for ports and state."""
 
-    def __init__(self, goal_features: GoalFeatures | None = None, config: PcaeFeaturizerConfig | None = None, model: PointCloudAutoencoder | None = None):
+    def __init__(self, goal_features: GoalFeatures | None = None, config: PcaeFeaturizerConfig | None = None,
+                 model: PointCloudAutoencoder | None = None):
         super().__init__()
         config = config if config is not None else PcaeFeaturizerConfig()
         if not (np.isfinite(config.period_s) and config.period_s > 0):
@@ -527,7 +527,8 @@ class PcaeFeaturizer(LeafSystem):
         if self._valid_port.HasValue(context):
             v = float(self._valid_port.Eval(context)[0])
             if not np.isfinite(v):
-                raise ValueError(f"PcaeFeaturizer: input 'valid' is {v} at t = {context.get_time():.3f} s, expected 0 or 1")
+                raise ValueError(f"PcaeFeaturizer: input 'valid' is {v} at t = {context.get_time():.3f} s, "
+                                 "expected 0 or 1")
             if v <= 0.5:
                 return False
         return self._points_port.HasValue(context)
@@ -541,7 +542,8 @@ class PcaeFeaturizer(LeafSystem):
         try:
             pts = check_points(points, "object_points", N_POINTS)
         except ValueError as e:
-            raise ValueError(f"PcaeFeaturizer at t = {context.get_time():.3f} s: {e} (world-frame cloud in metres)") from e
+            raise ValueError(f"PcaeFeaturizer at t = {context.get_time():.3f} s: {e} "
+                             "(world-frame cloud in metres)") from e
         if self._X_WO_port.HasValue(context):
             X_state = discrete_state.get_mutable_vector(self._X_WO_index)
             if context.get_discrete_state(self._flags_index).get_value()[1] < 0.5:   # the run's first valid frame

@@ -532,7 +532,8 @@ def _check_object_model(config: StationConfig, url: str) -> None:
     try:
         instance = parser.AddModels(url=url)[0]
     except RuntimeError as e:
-        _bad("directives (the object's add_model.file)", url, f"a model Drake parses ({' '.join(str(e).split())[:200]})")
+        _bad("directives (the object's add_model.file)", url,
+             f"a model Drake parses ({' '.join(str(e).split())[:200]})")
     object_parts(plant, instance, config)
 
 

@@ -11,7 +11,8 @@ hold (docs/architecture.md, "One diagram per skill execution"; the pattern of
     gripper_command --> [SchunkWsgCommandSender] --> LCM PANDA_HAND_COMMAND
     LCM PANDA_STATUS --> [PandaStatusReceiver] --> panda_state, ee_pose (forward kinematics), external_torque
                      \\-> [status monitor]: stale status, the robot's own reflex
-    LCM camera images --> [LcmImageArrayDecoder] --> color/depth/label_image --> [DepthImageToPointCloud] --> point_cloud
+    LCM camera images --> [LcmImageArrayDecoder] --> color/depth/label_image
+                                                         --> [DepthImageToPointCloud] --> point_cloud
                       \\-> [ImageCrop] --> object_*_image --> [DepthImageToPointCloud] --> object_point_cloud
 
 Talking to the drake-franka-driver (``--control_mode=position``):

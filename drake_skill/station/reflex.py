@@ -79,8 +79,9 @@ def reflex_filter_step(x: np.ndarray, force: float, tau, now: float, params: np.
 class ReflexMonitor(LeafSystem):
     """Inputs ``contact_force`` [1] (robot-scene contact force [N]) and ``external_torque``
     [7] [N m]; output ``filtered`` [10]: the state [f_hat, tau_hat (7), time of the last
-    update [s], peak f_hat] (a state output port: no Python per evaluation). The module docstring gives the filter; ``reflex`` is the scenario's
-    ``ReflexConfig`` (the parameter's defaults), ``period`` the update's [s].
+    update [s], peak f_hat] (a state output port: no Python per evaluation). The module
+    docstring gives the filter; ``reflex`` is the scenario's ``ReflexConfig`` (the
+    parameter's defaults), ``period`` the update's [s].
     """
 
     def __init__(self, reflex, period: float):

@@ -35,7 +35,8 @@ def scripted_plan(skill, X_WO: RigidTransform, X_WE_home: RigidTransform,
     frames = keyframes(spec)
     if not frames:
         raise ValueError(f"skill {spec.name!r} has no keyframes to script; record its demonstrations by "
-                         "teleoperation (drake-skill demos record --interactive) or on the robot (drake-skill hardware record-demo)")
+                         "teleoperation (drake-skill demos record --interactive) "
+                         "or on the robot (drake-skill hardware record-demo)")
     times, poses, grip = [0.0], [X_WE_home], [0.0]
     t_prev_key, t = 0.0, 0.0
     for t_key, p_OE, R_OE, opening in frames:
