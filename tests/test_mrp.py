@@ -101,3 +101,27 @@ def test_bad_input_is_a_clear_error():
         exact_values(PI, P, TERMINAL, 0)
     with pytest.raises(ValueError, match="gamma"):
         exact_values(PI, P, TERMINAL, L, gamma=1.5)
+
+
+def test_short_chain_values_and_visit_times_by_hand():
+    """A 3-step chain worked by hand; every reachable state has total visit mass <= 1
+    (0.75 and 0.5), state 3 is never reached (value 0, visit time NaN).
+
+    p_t: (1, 0, 0, 0), (.5, .5, 0, 0), (.25, .25, .5, 0); u_2 = r, u_1 = (0, .9, 1.9, .),
+    u_0 = (.405, 1.71, 2.71, .); v = sum_t p_t u_t / sum_t p_t, then v(T) *= 2.
+    """
+    pi = np.array([1.0, 0.0, 0.0, 0.0])
+    P = np.array([[0.5, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    v = exact_values(pi, P, [2], 3, gamma=0.9, terminal_scale=2.0)
+    np.testing.assert_allclose(v, [0.405 / 1.75, 0.45 / 0.75, 2.0, 0.0], rtol=1e-12)
+    times = expected_visit_times(pi, P, 3)
+    np.testing.assert_allclose(times[:3], [1.0 / 1.75, 1.0 / 0.75, 2.0], rtol=1e-12)
+    assert np.isnan(times[3])
+
+
+def test_sequence_counts_are_checked():
+    S = sample_state_sequences(PI, P, 1, 5, random_state=0)
+    assert S.shape == (1, 5)
+    for n, L in ((0, 5), (5, 0)):
+        with pytest.raises(ValueError, match=r"n_sequences, length"):
+            sample_state_sequences(PI, P, n, L, random_state=0)
