@@ -122,6 +122,8 @@ def test_short_chain_values_and_visit_times_by_hand():
 def test_sequence_counts_are_checked():
     S = sample_state_sequences(PI, P, 1, 5, random_state=0)
     assert S.shape == (1, 5)
+    S = sample_state_sequences(PI, P, 3, 1, random_state=0)  # one frame: the start states only
+    assert S.shape == (3, 1) and set(S[:, 0]) <= {0, 1}
     for n, L in ((0, 5), (5, 0)):
         with pytest.raises(ValueError, match=r"n_sequences, length"):
             sample_state_sequences(PI, P, n, L, random_state=0)
