@@ -131,3 +131,8 @@ def test_sequence_counts_are_checked():
     for n, L in ((0, 5), (5, 0)):
         with pytest.raises(ValueError, match=r"n_sequences, length"):
             sample_state_sequences(PI, P, n, L, random_state=0)
+
+
+def test_returns_of_integer_rewards_are_not_truncated():
+    G = discounted_returns(np.array([[0, 0, 1], [1, 0, 0]]), 0.9)
+    np.testing.assert_allclose(G, [[0.81, 0.9, 1.0], [1.0, 0.0, 0.0]], rtol=1e-12)
