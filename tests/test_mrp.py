@@ -103,6 +103,11 @@ def test_bad_input_is_a_clear_error():
         exact_values(PI, P, TERMINAL, 0)
     with pytest.raises(ValueError, match="gamma"):
         exact_values(PI, P, TERMINAL, L, gamma=1.5)
+    # a (1, 4) row of start probabilities would pass the transmat shape check
+    with pytest.raises(ValueError, match=r"startprob: expected shape \(k,\), got \(1, 4\)"):
+        exact_values(PI[None], P, TERMINAL, L)
+    with pytest.raises(ValueError, match=r"startprob: expected shape \(k,\), got \(0,\)"):
+        exact_values([], P, TERMINAL, L)
 
 
 def test_short_chain_values_and_visit_times_by_hand():
