@@ -141,3 +141,14 @@ def test_sequence_counts_are_checked():
 def test_returns_of_integer_rewards_are_not_truncated():
     G = discounted_returns(np.array([[0, 0, 1], [1, 0, 0]]), 0.9)
     np.testing.assert_allclose(G, [[0.81, 0.9, 1.0], [1.0, 0.0, 0.0]], rtol=1e-12)
+
+
+def test_terminal_states_forms():
+    """One index, a list, a float array of indices: the same set T; several states; negatives refused."""
+    v = exact_values(PI, P, [3], L)
+    for form in (3, np.array([3.0])):
+        np.testing.assert_array_equal(exact_values(PI, P, form, L), v)
+    both = exact_values(PI, P, [2, 3], L, terminal_scale=2.0)
+    assert both[2] > v[2] and both[3] == v[3]  # state 2 is now rewarded (and scaled) too
+    with pytest.raises(ValueError, match=r"terminal_states: .* got \[-1\]"):
+        exact_values(PI, P, [-1], L)
