@@ -152,3 +152,12 @@ def test_terminal_states_forms():
     assert both[2] > v[2] and both[3] == v[3]  # state 2 is now rewarded (and scaled) too
     with pytest.raises(ValueError, match=r"terminal_states: .* got \[-1\]"):
         exact_values(PI, P, [-1], L)
+
+
+def test_parameter_bounds_are_inclusive():
+    """length 1, gamma 0 and gamma 1 are valid; terminal_scale 0 is not."""
+    np.testing.assert_allclose(exact_values(PI, P, [1], 1), [0.0, 2.0, 0.0, 0.0])  # one frame: v = c r
+    np.testing.assert_allclose(exact_values(PI, P, [3], L, gamma=0.0), [0.0, 0.0, 0.0, 2.0])
+    assert exact_values(PI, P, [3], L, gamma=1.0)[0] > exact_values(PI, P, [3], L, gamma=0.9)[0]
+    with pytest.raises(ValueError, match=r"terminal_scale: expected c > 0 .* got 0"):
+        exact_values(PI, P, [3], L, terminal_scale=0)
