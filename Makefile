@@ -4,7 +4,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 PYTHON ?= python3
 
-.PHONY: setup demo test bench constraints clean-venv
+.PHONY: setup demo test bench mutation constraints clean-venv
 
 setup: $(STAMP)
 
@@ -27,6 +27,26 @@ test: setup
 
 bench: setup
 	$(PY) tools/bench_station.py
+
+# Mutation testing (mutmut, configured in pyproject.toml [tool.mutmut]); not part of
+# `make test` nor CI: hours on two cores. One mutmut run per module (MUTATE=...
+# picks some: `make mutation MUTATE="drake_skill.reward.mrp drake_skill.fileio"`);
+# mutmut runs each mutant against only the tests of the selection that call the
+# mutated function, and resumes where it stopped. Scores: docs/mutation.md.
+MUTATE ?= drake_skill.action.quaternion drake_skill.reward.mrp drake_skill.fileio \
+	drake_skill.learning.policy_search drake_skill.reward.pomrp drake_skill.perception.features \
+	drake_skill.action.dmp drake_skill.perception.segmentation drake_skill.demos.format \
+	drake_skill.reward.goal_model
+MUTMUT_CHILDREN ?= 2
+mutation: setup
+	$(PY) -m pip install -q -c constraints.txt -e '.[test,mutation]'
+	@mkdir -p mutants
+	@for m in $(MUTATE); do \
+		echo "== mutmut run $$m.* (log: mutants/$$m.log)"; \
+		nice -n 15 $(VENV)/bin/mutmut run --max-children $(MUTMUT_CHILDREN) "$$m.*" > mutants/$$m.log 2>&1 \
+			|| { tail -n 40 mutants/$$m.log; exit 1; }; \
+	done
+	$(VENV)/bin/mutmut results
 
 # Rewrites constraints.txt from the versions installed in .venv.
 constraints: setup

@@ -1,5 +1,7 @@
 """MRP state values: Monte Carlo (thesis Eqs. 4.1-4.3) against dynamic programming."""
 
+import warnings
+
 import numpy as np
 import pytest
 from pydrake.common.yaml import yaml_load_typed
@@ -101,3 +103,61 @@ def test_bad_input_is_a_clear_error():
         exact_values(PI, P, TERMINAL, 0)
     with pytest.raises(ValueError, match="gamma"):
         exact_values(PI, P, TERMINAL, L, gamma=1.5)
+    # a (1, 4) row of start probabilities would pass the transmat shape check
+    with pytest.raises(ValueError, match=r"startprob: expected shape \(k,\), got \(1, 4\)"):
+        exact_values(PI[None], P, TERMINAL, L)
+    with pytest.raises(ValueError, match=r"startprob: expected shape \(k,\), got \(0,\)"):
+        exact_values([], P, TERMINAL, L)
+
+
+def test_short_chain_values_and_visit_times_by_hand():
+    """A 3-step chain worked by hand; every reachable state has total visit mass <= 1
+    (0.75 and 0.5), state 3 is never reached (value 0, visit time NaN).
+
+    p_t: (1, 0, 0, 0), (.5, .5, 0, 0), (.25, .25, .5, 0); u_2 = r, u_1 = (0, .9, 1.9, .),
+    u_0 = (.405, 1.71, 2.71, .); v = sum_t p_t u_t / sum_t p_t, then v(T) *= 2.
+    """
+    pi = np.array([1.0, 0.0, 0.0, 0.0])
+    P = np.array([[0.5, 0.5, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+    v = exact_values(pi, P, [2], 3, gamma=0.9, terminal_scale=2.0)
+    np.testing.assert_allclose(v, [0.405 / 1.75, 0.45 / 0.75, 2.0, 0.0], rtol=1e-12)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the unreachable state is not a 0/0 RuntimeWarning
+        times = expected_visit_times(pi, P, 3)
+    np.testing.assert_allclose(times[:3], [1.0 / 1.75, 1.0 / 0.75, 2.0], rtol=1e-12)
+    assert np.isnan(times[3])
+
+
+def test_sequence_counts_are_checked():
+    S = sample_state_sequences(PI, P, 1, 5, random_state=0)
+    assert S.shape == (1, 5)
+    S = sample_state_sequences(PI, P, 3, 1, random_state=0)  # one frame: the start states only
+    assert S.shape == (3, 1) and set(S[:, 0]) <= {0, 1}
+    for n, L in ((0, 5), (5, 0)):
+        with pytest.raises(ValueError, match=r"n_sequences, length"):
+            sample_state_sequences(PI, P, n, L, random_state=0)
+
+
+def test_returns_of_integer_rewards_are_not_truncated():
+    G = discounted_returns(np.array([[0, 0, 1], [1, 0, 0]]), 0.9)
+    np.testing.assert_allclose(G, [[0.81, 0.9, 1.0], [1.0, 0.0, 0.0]], rtol=1e-12)
+
+
+def test_terminal_states_forms():
+    """One index, a list, a float array of indices: the same set T; several states; negatives refused."""
+    v = exact_values(PI, P, [3], L)
+    for form in (3, np.array([3.0])):
+        np.testing.assert_array_equal(exact_values(PI, P, form, L), v)
+    both = exact_values(PI, P, [2, 3], L, terminal_scale=2.0)
+    assert both[2] > v[2] and both[3] == v[3]  # state 2 is now rewarded (and scaled) too
+    with pytest.raises(ValueError, match=r"terminal_states: .* got \[-1\]"):
+        exact_values(PI, P, [-1], L)
+
+
+def test_parameter_bounds_are_inclusive():
+    """length 1, gamma 0 and gamma 1 are valid; terminal_scale 0 is not."""
+    np.testing.assert_allclose(exact_values(PI, P, [1], 1), [0.0, 2.0, 0.0, 0.0])  # one frame: v = c r
+    np.testing.assert_allclose(exact_values(PI, P, [3], L, gamma=0.0), [0.0, 0.0, 0.0, 2.0])
+    assert exact_values(PI, P, [3], L, gamma=1.0)[0] > exact_values(PI, P, [3], L, gamma=0.9)[0]
+    with pytest.raises(ValueError, match=r"terminal_scale: expected c > 0 .* got 0"):
+        exact_values(PI, P, [3], L, terminal_scale=0)

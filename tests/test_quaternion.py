@@ -87,3 +87,44 @@ def test_as_quaternions_validates_and_normalises():
         as_quaternions([[np.nan, 0, 0, 1.0]], name="demo q")
     with pytest.raises(ValueError, match=r"demo q: expected shape \(\.\.\., 4\)"):
         as_quaternions(np.ones((2, 3)), name="demo q")
+
+
+def test_rotation_matrix_matches_scipy(rotations):
+    """quat_to_rotation_matrix against scipy, on unit and on scaled (non-unit) inputs."""
+    from drake_skill.action.quaternion import quat_to_rotation_matrix
+
+    for rot, scale in zip(rotations[:10], np.linspace(0.5, 3.0, 10)):
+        R = quat_to_rotation_matrix(scale * _wxyz(rot))
+        np.testing.assert_allclose(R, rot.as_matrix(), atol=1e-12)
+
+
+def test_normalize_single_and_batched():
+    from drake_skill.action.quaternion import quat_normalize
+
+    np.testing.assert_allclose(quat_normalize([0.0, 0.0, 3.0, 4.0]), [0.0, 0.0, 0.6, 0.8], atol=1e-15)
+    out = quat_normalize([[2.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.5]])
+    np.testing.assert_allclose(out, [[1.0, 0, 0, 0], [0, 0, 0, 1.0]], atol=1e-15)
+
+
+def test_single_quaternion_and_single_rotation_vector():
+    """Shape (4,) and (3,) inputs: the functions broadcast over *zero* leading axes too."""
+    out = as_quaternions(np.array([0.0, 0.0, 0.0, 1.001], dtype=np.float32))
+    assert out.shape == (4,) and out.dtype == np.float64
+    np.testing.assert_allclose(out, [0.0, 0.0, 0.0, 1.0], atol=1e-15)
+    q = quat_exp([0.0, 0.0, np.pi / 4])
+    np.testing.assert_allclose(q, [np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4)], atol=1e-15)
+
+
+def test_make_continuous_reference_edge_cases():
+    q = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
+    # q[0] on the reference's hemisphere (dot 0.71), q[1] not (dot -0.71): only q[0] decides.
+    ref = np.array([1.0, -1.0, 0.0, 0.0]) / np.sqrt(2.0)
+    np.testing.assert_array_equal(make_quaternions_continuous(q, reference=ref), q)
+    # a single sample is still put on the reference's hemisphere; the caller's array is not changed
+    single = np.array([[0.0, 0.0, 0.0, 1.0]])
+    np.testing.assert_array_equal(make_quaternions_continuous(single, reference=[0.0, 0.0, 0.0, -1.0]),
+                                  [[0.0, 0.0, 0.0, -1.0]])
+    np.testing.assert_array_equal(single, [[0.0, 0.0, 0.0, 1.0]])
+    # an empty path stays empty, with or without a reference
+    empty = make_quaternions_continuous(np.zeros((0, 4)), reference=[1.0, 0.0, 0.0, 0.0])
+    assert empty.shape == (0, 4)
