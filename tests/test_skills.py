@@ -96,7 +96,8 @@ def test_a_bad_skill_file_is_one_line_naming_the_file_and_the_field(tmp_path, ch
 
 
 def test_keyframes_beyond_the_reach_name_the_distance(tmp_path):
-    with pytest.raises(ValueError, match=r"keyframes\[0\]\.pose.*beyond its 0.855 m reach"):
+    reach = r"keyframes\[0\]\.pose.*within the Panda's 0.855 m reach.*m from the shoulder"
+    with pytest.raises(ValueError, match=reach):
         load_skill(_write(tmp_path, p1="[0.3, 0.0, 0.3]"))
     # The shipped skills stay within it on every pose their scenarios draw.
     for name in shipped_skill_names():

@@ -13,6 +13,7 @@ import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RotationMatrix
 
+from drake_skill import configs
 from drake_skill.configs import load_typed
 from drake_skill.station.config import (SCENARIO_DIR, StationConfig, SuccessConfig, load_station_config,
                                         object_joint_name, validate_success)
@@ -99,40 +100,39 @@ class SkillSpec:
         return config
 
 
-def _bad(where: str, field: str, value, fix: str):
-    raise ValueError(f"{where}: field '{field}' = {value!r}: {fix}")
+def _bad(where: str, field: str, value, expected: str):
+    """The one error format of drake-skill's configurations (``drake_skill.configs.bad``)."""
+    configs.bad(f"skill file {where}", field, value, expected)
 
 
 def _check(spec: SkillSpec, where: str) -> SkillSpec:
     """Raises a one-line ValueError naming the file, the field and the fix."""
     if not spec.name or not all(c.isalnum() or c in "_-" for c in spec.name):
-        _bad(where, "name", spec.name, "give a name of letters, digits, '_' and '-'")
+        _bad(where, "name", spec.name, "a name of letters, digits, '_' and '-'")
     if not spec.scenario:
-        _bad(where, "scenario", spec.scenario, "name a shipped scenario (drake-skill skills) or a scenario YAML")
+        _bad(where, "scenario", spec.scenario, "a shipped scenario's name (drake-skill skills) or a scenario YAML")
     path = spec.scenario_path()
     if not path.is_file():
-        _bad(where, "scenario", spec.scenario, f"no such scenario file {path}; name a shipped scenario "
-             f"({', '.join(sorted(p.stem for p in SCENARIO_DIR.glob('*.yaml')))}) or an existing YAML file")
+        shipped = ", ".join(sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml")))
+        _bad(where, "scenario", spec.scenario,
+             f"a shipped scenario ({shipped}) or an existing YAML file ({path} does not exist)")
     if int(spec.demonstrations) < 1:
-        _bad(where, "demonstrations", spec.demonstrations, "record at least 1 (the thesis: 2 or 3)")
+        _bad(where, "demonstrations", spec.demonstrations, "at least 1 (the thesis: 2 or 3)")
     if not 3 <= int(spec.dmp_bases) <= 100:
-        _bad(where, "dmp_bases", spec.dmp_bases, "give 3..100 basis functions (thesis Table 6.1: 9-20)")
+        _bad(where, "dmp_bases", spec.dmp_bases, "3..100 basis functions (thesis Table 6.1: 9-20)")
     if not (math.isfinite(spec.exploration_scale) and 0 < spec.exploration_scale <= 100):
-        _bad(where, "exploration_scale", spec.exploration_scale, "give a factor in (0, 100] on Sigma_b^0")
+        _bad(where, "exploration_scale", spec.exploration_scale, "a factor in (0, 100] on Sigma_b^0")
     if spec.gripper_opening is not None and not 0.0 <= spec.gripper_opening <= 2 * FINGER_MAX:
         _bad(where, "gripper_opening", spec.gripper_opening,
-             f"give an opening in [0, {2 * FINGER_MAX}] m, or null for the demonstrations' median")
-    try:
-        validate_success(spec.success)
-    except ValueError as e:
-        raise ValueError(f"{where}: {e}") from None
+             f"an opening in [0, {2 * FINGER_MAX}] m, or null for the demonstrations' median")
+    validate_success(spec.success, "success", what=f"skill file {where}")
     t_prev = 0.0
     for i, k in enumerate(spec.keyframes):
         if not (math.isfinite(k.t) and k.t > t_prev):
-            _bad(where, f"keyframes[{i}].t", k.t, f"give times that increase from 0 (the previous is {t_prev} s)")
+            _bad(where, f"keyframes[{i}].t", k.t, f"times that increase from 0 (the previous is {t_prev} s)")
         t_prev = k.t
         if not 0.0 <= k.gripper <= 2 * FINGER_MAX:
-            _bad(where, f"keyframes[{i}].gripper", k.gripper, f"give an opening in [0, {2 * FINGER_MAX}] m")
+            _bad(where, f"keyframes[{i}].gripper", k.gripper, f"an opening in [0, {2 * FINGER_MAX}] m")
     return spec
 
 
@@ -143,7 +143,7 @@ def check_with_scenario(spec: SkillSpec, config: StationConfig, where: str = "")
     joint = object_joint_name(config)
     if spec.success.joint != joint:
         _bad(where, "success.joint", spec.success.joint,
-             f"the scenario's object has one joint, '{joint}'; name it")
+             f"the scenario's object's one joint, '{joint}'")
     obj = config.object
     for i, (_, p_OE, _, _) in enumerate(keyframes(spec)):
         for sx in (-1, 1):
@@ -154,8 +154,9 @@ def check_with_scenario(spec: SkillSpec, config: StationConfig, where: str = "")
                     far = float(np.linalg.norm(X_WO @ p_OE - SHOULDER))
                     if far > REACH_M:
                         _bad(where, f"keyframes[{i}].pose", [round(v, 3) for v in p_OE],
-                             f"{far:.2f} m from the Panda's shoulder on an object pose the scenario draws, "
-                             f"beyond its {REACH_M} m reach; move the keyframe or the object closer")
+                             f"a pose within the Panda's {REACH_M} m reach on every object pose the "
+                             f"scenario draws (this one is {far:.2f} m from the shoulder); move it or the "
+                             "object closer")
 
 
 def _screw(X0: RigidTransform, X1: RigidTransform, f: float) -> RigidTransform:

@@ -537,17 +537,20 @@ def _check_object_model(config: StationConfig, url: str) -> None:
     object_parts(plant, instance, config)
 
 
-def validate_success(rule: SuccessConfig, field: str = "success") -> SuccessConfig:
-    """Raises ValueError naming the field of a success rule that cannot work; returns it."""
+def validate_success(rule: SuccessConfig, field: str = "success", what: str = "station config") -> SuccessConfig:
+    """Raises ValueError naming the field of a success rule that cannot work (``what``: the
+    configuration it is in); returns it."""
+    _bad = functools.partial(configs.bad, what)
     if not rule.joint:
         _bad(f"{field}.joint", rule.joint, "the name of the object's joint the rule reads")
     if (rule.above is None) == (rule.below is None):
         _bad(f"{field}.above/below", (rule.above, rule.below),
              "exactly one of 'above' (success at or above it) and 'below' (at or below it)")
     value = rule.above if rule.above is not None else rule.below
-    _number(f"{field}.{'above' if rule.above is not None else 'below'}", value,
-            what="a finite joint position [rad or m]")
-    _number(f"{field}.settle_time", rule.settle_time, 0.0, 60.0, what="a duration [s]")
+    if not math.isfinite(float(value)):
+        _bad(f"{field}.{'above' if rule.above is not None else 'below'}", value, "a finite joint position [rad or m]")
+    if not (math.isfinite(float(rule.settle_time)) and 0.0 <= rule.settle_time <= 60.0):
+        _bad(f"{field}.settle_time", rule.settle_time, "a duration in [0, 60] s")
     return rule
 
 
