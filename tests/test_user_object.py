@@ -14,6 +14,7 @@ import pytest
 from drake_skill.cli.main import main
 from drake_skill.demos.format import load_demonstrations
 from drake_skill.skill import Skill
+from drake_skill.station.config import ROBOT_DIRECTIVES
 
 #: A red tray (16 x 24 x 9 cm) whose 1.2 cm top plate slides along +y up to 15 cm,
 #: with a ridge across it 9 cm from its middle toward -y. Red's hue range wraps through 0.
@@ -55,18 +56,8 @@ SDF = """<?xml version="1.0"?>
 </sdf>
 """
 
-ROBOT = """directives:
-- add_model: {name: panda, file: "package://drake_skill_models/panda_arm.sdf"}
-- add_weld: {parent: world, child: panda::panda_link0}
-- add_model: {name: panda_hand, file: "package://drake_skill_models/panda_hand.sdf"}
-- add_weld:
-    parent: panda::panda_link8
-    child: panda_hand::panda_hand
-    X_PC: {rotation: !Rpy {deg: [0.0, 0.0, -45.0]}}
-- add_model: {name: table, file: "package://drake_skill_models/table.sdf"}
-- add_weld: {parent: world, child: table::table_top}
-- add_model: {name: red_tray, file: models/red_tray.sdf}
-"""
+# The robot's directives as the shipped scenarios write them, then the user's object.
+ROBOT = "directives:" + ROBOT_DIRECTIVES + "- add_model: {name: red_tray, file: models/red_tray.sdf}\n"
 
 SCENARIO = ROBOT + """object:
   model: red_tray
