@@ -33,7 +33,7 @@ from drake_skill.station.camera import (
 )
 from drake_skill.station.config import scenario_for_skill
 from drake_skill.station.scripted import scripted_plan
-from drake_skill.station.simulation import StationSimulation
+from drake_skill.station.sim.simulation import StationSimulation
 
 HAND_BODIES = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
 

@@ -20,7 +20,7 @@ from drake_skill.perception.systems import ObjectSegmenter, segmenter_config_for
 from drake_skill.station.pose_source import hold_plan
 from drake_skill.skills import keyframes, load_skill
 from drake_skill.station.scripted import scripted_plan
-from drake_skill.station.simulation import StationSimulation
+from drake_skill.station.sim.simulation import StationSimulation
 from drake_skill.station.config import scenario_for_skill
 
 

@@ -14,7 +14,7 @@ from drake_skill.perception.pcae import cloud_in_object_frame
 from drake_skill.perception.segmentation import fit_table_plane, process_frame
 from drake_skill.reward.systems import add_goal_pipeline
 from drake_skill.skill import default_skill_config, fit_skill
-from drake_skill.station.builder import build_station
+from drake_skill.station.sim.builder import build_station
 from drake_skill.station.config import scenario_for_skill
 from drake_skill.station.pose_source import PoseTrajectorySource
 from drake_skill.station.scripted import scripted_plan

@@ -33,15 +33,16 @@ from drake_skill.action.quaternion import make_quaternions_continuous
 from drake_skill.demos.format import downsample_action
 from drake_skill.learning.rollout import ActionModel, RolloutConfig, RolloutRunner
 from drake_skill.station import limits
-from drake_skill.station.builder import build_station
+from drake_skill.station.sim.builder import build_station
 from drake_skill.station.config import scenario_for_skill
-from drake_skill.station.hardware import (STATUS_CHECK_PERIOD, ReflexError, StaleStatusError, StatusMonitor,
+from drake_skill.station.hardware.station import (STATUS_CHECK_PERIOD, ReflexError, StaleStatusError, StatusMonitor,
                                           build_hardware_station)
-from drake_skill.station.hardware_config import HardwareConfig, load_hardware_config
+from drake_skill.station.hardware.config import HardwareConfig, load_hardware_config
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource
 from drake_skill.station.scripted import scripted_plan
-from drake_skill.station.sim_robot import DriverProtocolError, SimRobot
-from drake_skill.station.simulation import StationSimulation, pose_to_vector
+from drake_skill.station.sim.lcm_robot import DriverProtocolError, SimRobot
+from drake_skill.station.recording import pose_to_vector
+from drake_skill.station.sim.simulation import StationSimulation
 
 #: Ports the physics issue adds to the simulated station (the hardware one has them already).
 PHYSICS_PORTS = {"external_torque", "joint_acceleration_commanded"}
@@ -307,7 +308,7 @@ def test_jump_is_rate_limited_clipped_and_stale_status_stops_the_station():
 def test_pressing_into_the_table_trips_the_shared_reflex():
     """The recording loop of simulation (record_station and its reflex monitor)
     decides the reflex on the robot from the driver's external joint torques."""
-    from drake_skill.station.simulation import record_station
+    from drake_skill.station.recording import record_station
 
     hardware_config = _hardware_config(_scenario("open"))
     hardware_config.workspace.lower[2] = -0.3          # let the command go below the table top
@@ -359,7 +360,7 @@ def test_the_robots_own_reflex_stops_the_station(mode):
 
 
 def test_measured_external_torque_goes_to_the_shared_reflex_check():
-    """The recorder's reflex monitor (drake_skill.station.simulation) reads
+    """The recorder's reflex monitor (drake_skill.station.recording) reads
     ``robot_scene_contact``; on the robot that is the driver's external torque."""
     hardware_config = _hardware_config(_scenario("open"))
     lcm = DrakeLcm("memq://")

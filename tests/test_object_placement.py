@@ -5,7 +5,7 @@ import pytest
 from pydrake.math import RollPitchYaw
 
 from drake_skill.learning.evaluation import HELD_OUT_SEED0
-from drake_skill.station.builder import Station
+from drake_skill.station.sim.builder import Station
 from drake_skill.station.config import scenario_for_skill
 
 

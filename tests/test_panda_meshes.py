@@ -15,7 +15,7 @@ from pydrake.multibody.tree import BodyIndex
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_skill.station.builder import add_scene_plant
+from drake_skill.station.sim.builder import add_scene_plant
 from drake_skill.station.config import scenario_for_skill
 from drake_skill.station.models import add_package_paths, model_url, panda_illustration_table
 
@@ -122,7 +122,7 @@ def test_each_mesh_sits_on_its_body(sdf_plant):
 
 def test_meshcat_receives_the_franka_meshes():
     """The station drawn in Meshcat: the page holds the glTF files' bytes."""
-    from drake_skill.station.builder import build_station
+    from drake_skill.station.sim.builder import build_station
 
     meshcat = Meshcat()
     station = build_station(_no_camera(), meshcat=meshcat)

@@ -10,7 +10,8 @@ from drake_skill.station import limits
 from drake_skill.station.config import scenario_for_skill
 from drake_skill.station.pose_source import PosePlan, hold_plan
 from drake_skill.station.scripted import scripted_plan
-from drake_skill.station.simulation import ReflexError, StationSimulation
+from drake_skill.station.recording import ReflexError
+from drake_skill.station.sim.simulation import StationSimulation
 
 
 pytestmark = pytest.mark.usefixtures("quiet_differential_ik")

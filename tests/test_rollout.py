@@ -12,7 +12,8 @@ from drake_skill.learning.rollout import FAILURE_REASONS, ActionModel, RolloutCo
 from drake_skill.skill import Skill
 from drake_skill.station.config import scenario_for_skill
 from drake_skill.station.scripted import scripted_plan
-from drake_skill.station.simulation import DivergedError, ReflexError, SolverError, StationSimulation, pose_to_vector
+from drake_skill.station.recording import DivergedError, ReflexError, SolverError, pose_to_vector
+from drake_skill.station.sim.simulation import StationSimulation
 
 from learning_support import SETTLE, TAU, rollout_config, shared_skill
 
@@ -168,7 +169,7 @@ def test_the_loggers_record_what_sampling_the_ports_after_each_advance_gives(dra
     """A rollout's records come from the loggers in the diagram (StationLoggers); they
     equal, bit for bit, a StationRecorder stepping the same rollout sample by sample
     (the state AdvanceTo(t) leaves, events due at t pending), peak forces included."""
-    from drake_skill.station.simulation import StationRecorder
+    from drake_skill.station.recording import StationRecorder
 
     dmp, runner, _ = draw_setup
     logged = runner.run(dmp.weights, 5)

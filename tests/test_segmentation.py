@@ -31,7 +31,7 @@ SEEDS = (0, 1, 2)
 def station_frames():
     """Per skill, per seed, the object camera's crop (what the ObjectSegmenter reads):
     (xyz (P, 3), rgb (P, 3), object pixel mask (H, W), X_WO 4x4, image shape, table mask (H, W))."""
-    from drake_skill.station.simulation import StationSimulation
+    from drake_skill.station.sim.simulation import StationSimulation
     from drake_skill.station.config import scenario_for_skill
 
     frames = {}

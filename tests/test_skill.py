@@ -113,7 +113,7 @@ def _run_pipeline(skill, plan_for, seed, duration):
 
     from drake_skill.reward.systems import add_goal_pipeline
     from drake_skill.station.pose_source import PoseTrajectorySource
-    from drake_skill.station.builder import build_station
+    from drake_skill.station.sim.builder import build_station
     from drake_skill.station.config import scenario_for_skill
 
     builder = DiagramBuilder()

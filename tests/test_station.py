@@ -9,7 +9,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from drake_skill.station.models import add_package_paths, model_url
 from drake_skill.station.pose_source import hold_plan
 from drake_skill.station.scripted import scripted_plan
-from drake_skill.station.simulation import StationSimulation
+from drake_skill.station.sim.simulation import StationSimulation
 from drake_skill.station.config import StationConfig, load_station_config, scenario_for_skill
 from drake_skill.station.success import judge_success
 
@@ -227,7 +227,7 @@ def test_object_joint_can_be_set():
 
 def test_more_cameras_are_data_and_export_their_images():
     """A scenario's ``cameras`` render beside the perception camera, which stays the one perception reads."""
-    from drake_skill.station.builder import build_station
+    from drake_skill.station.sim.builder import build_station
 
     config = load_station_config(data="""
 cameras:

@@ -42,7 +42,7 @@ def check_skill(skill, seeds, reflex):
     import numpy as np
 
     from drake_skill.station.config import scenario_for_skill
-    from drake_skill.station.simulation import StationSimulation
+    from drake_skill.station.sim.simulation import StationSimulation
 
     results = {}
     for label, step in (("chosen", None), ("1ms", 0.001)):
@@ -75,7 +75,7 @@ def check_skill(skill, seeds, reflex):
 
 def check_lid(offset_deg):
     from drake_skill.station.config import scenario_for_skill
-    from drake_skill.station.simulation import StationSimulation
+    from drake_skill.station.sim.simulation import StationSimulation
 
     config = scenario_for_skill("open")
     config.enable_camera = False

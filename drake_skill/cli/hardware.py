@@ -6,7 +6,7 @@
                              [--duration 15] [--seed 0] [--yes]
 
 The same diagram as in simulation, with the simulated station swapped for
-the hardware station (``drake_skill.station.hardware``): position commands
+the hardware station (``drake_skill.station.hardware.station``): position commands
 on PANDA_COMMAND (wall-clock stamped, rate limited, the hand clipped to the
 workspace box, the first command the measured position), the status from
 PANDA_STATUS (no status for 100 ms stops it), the camera's images from
@@ -97,7 +97,7 @@ def _run(args) -> int:
     from drake_skill.fileio import atomic_write_json
     from drake_skill.learning.rollout import RolloutConfig, RolloutRunner
     from drake_skill.skill import Skill
-    from drake_skill.station.hardware import build_hardware_station
+    from drake_skill.station.hardware.station import build_hardware_station
 
     if args.rollouts < 1:
         raise ValueError(f"--rollouts must be at least 1, got {args.rollouts}")
@@ -155,9 +155,9 @@ def _record_demo(args) -> int:
     from drake_skill.cli.sim_robot import load_config
     from drake_skill.demos.demonstrator import demonstration_from
     from drake_skill.demos.format import append_demonstration, existing_demo_files, load_demonstrations
-    from drake_skill.station.hardware import build_hardware_station
+    from drake_skill.station.hardware.station import build_hardware_station
     from drake_skill.station.pose_source import PoseTrajectorySource, hold_plan
-    from drake_skill.station.simulation import StationRecorder
+    from drake_skill.station.recording import StationRecorder
 
     if not args.duration > 0:
         raise ValueError(f"--duration must be positive, got {args.duration}")

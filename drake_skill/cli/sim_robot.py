@@ -47,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def load_config(path, lcm_url, skill, camera: bool = True):
     """The HardwareConfig of the CLI options (scenario from the skill unless the file names one)."""
     from drake_skill.cli import errors
-    from drake_skill.station.hardware_config import HardwareConfig, load_hardware_config, validate_hardware_config
+    from drake_skill.station.hardware.config import HardwareConfig, load_hardware_config, validate_hardware_config
 
     defaults = HardwareConfig()
     defaults.station = errors.skill(skill).station_config()
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     config = load_config(args.config, args.lcm_url, args.skill, camera=not args.no_camera)
 
     from drake_skill.cli import errors
-    from drake_skill.station.sim_robot import SimRobot
+    from drake_skill.station.sim.lcm_robot import SimRobot
 
     robot = SimRobot(config, guide=errors.skill(args.skill) if args.guide else None)
     url = config.lcm_url or "(LCM default)"

@@ -33,7 +33,7 @@ def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, 
     import matplotlib.pyplot as plt
 
     from drake_skill.station.scripted import scripted_plan
-    from drake_skill.station.simulation import StationSimulation
+    from drake_skill.station.sim.simulation import StationSimulation
     from drake_skill.station.success import rule_text
     skills = [errors.skill(skill, "--skills") for skill in skills]
     configs = {spec.name: errors.station_config(spec, scenario) for spec in skills}  # all checked first

@@ -52,7 +52,8 @@ from drake_skill import configs
 from drake_skill.configs import load_typed
 from drake_skill.demos.format import Demonstration, downsample_action, object_frame_poses
 from drake_skill.station.pose_source import PosePlan
-from drake_skill.station.simulation import ReflexError, StationRecorder, StationSimulation, pose_to_vector
+from drake_skill.station.recording import ReflexError, StationRecorder, pose_to_vector
+from drake_skill.station.sim.simulation import StationSimulation
 from drake_skill.station.success import judge_run
 from drake_skill.skills import SkillSpec, keyframes, load_skill
 from drake_skill.station.config import StationConfig
@@ -224,7 +225,7 @@ def humanlike_plan(skill, X_WO: RigidTransform, X_WE_home: RigidTransform, seed:
 # --------------------------------------------------------------------------- recording
 def demonstration_from(recorder: StationRecorder, skill: str, seed: int, X_WO_true: RigidTransform,
                        success: bool, metadata: dict) -> Demonstration:
-    """Assembles a :class:`~drake_skill.station.simulation.StationRecorder`'s samples
+    """Assembles a :class:`~drake_skill.station.recording.StationRecorder`'s samples
     (record_hz, frames at action_hz; with perception, the ObjectSegmenter's
     points) into a Demonstration (times start at 0)."""
     if not recorder.at_frame:

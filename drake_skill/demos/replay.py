@@ -1,7 +1,7 @@
 """A demonstration played back in Meshcat and saved as a standalone HTML page.
 
 The recorded joint positions ``q_100hz`` pose the Panda of the skill's
-scenario plant (:func:`drake_skill.station.builder.add_scene_plant`, what the
+scenario plant (:func:`drake_skill.station.sim.builder.add_scene_plant`, what the
 station simulates), the finger opening ``gripper_100hz`` its fingers (each at
 half the opening), the object sits at ``X_WO_true`` with its joint at
 ``object_state_100hz``. Nothing is simulated: each sample is drawn by a
@@ -36,7 +36,7 @@ def replay_html(demo: Demonstration, station_config=None, meshcat=None) -> str:
     from pydrake.systems.framework import DiagramBuilder
 
     from drake_skill.learning.loop import frame_meshcat_camera
-    from drake_skill.station.builder import add_scene_plant
+    from drake_skill.station.sim.builder import add_scene_plant
     from drake_skill.station.config import scenario_for_skill
 
     config = station_config if station_config is not None else scenario_for_skill(demo.skill)

@@ -3,7 +3,7 @@
 The thesis' demonstrator moves the robot's hand by hand (section 6.2). In
 simulation the user drives the hand's desired pose from the Meshcat page
 instead, and the demonstration is recorded exactly as the scripted
-demonstrator records one (``drake_skill.station.simulation.StationRecorder``,
+demonstrator records one (``drake_skill.station.recording.StationRecorder``,
 the station's one recording loop, with the diagram's ``ObjectSegmenter``):
 the measured hand pose in the object frame at 100 Hz and 10 Hz, the
 segmented object cloud at 10 Hz.
@@ -286,7 +286,7 @@ class TeleopSession:
     """
 
     def __init__(self, skill, meshcat, config: TeleopConfig | None = None, station_config=None):
-        from drake_skill.station.builder import build_station
+        from drake_skill.station.sim.builder import build_station
         from drake_skill.skills import load_skill
 
         spec = load_skill(skill)
@@ -336,7 +336,7 @@ class TeleopSession:
         """
         from drake_skill.demos.format import MIN_SAMPLES
         from drake_skill.demos.demonstrator import demonstration_from
-        from drake_skill.station.simulation import StationRecorder
+        from drake_skill.station.recording import StationRecorder
         from drake_skill.station.success import judge_run
 
         config = self.config

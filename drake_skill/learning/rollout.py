@@ -58,10 +58,10 @@ from pydrake.systems.primitives import ConstantVectorSource
 from drake_skill.common import IkWarningCounter
 from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
-from drake_skill.station.builder import Station, build_station
+from drake_skill.station.sim.builder import Station, build_station
 from drake_skill.station.config import StationConfig
 from drake_skill.station.records import StationLoggers
-from drake_skill.station.simulation import advance_station, check_joint_state, pose_to_vector
+from drake_skill.station.recording import advance_station, check_joint_state, pose_to_vector
 from drake_skill.station.success import judge_run
 
 __all__ = ["FAILURE_REASONS", "ActionModel", "ObjectPoseSource", "RolloutConfig", "RolloutResult",
@@ -281,7 +281,7 @@ class RolloutRunner:
         meshcat: a ``pydrake.geometry.Meshcat`` to draw the station in (or None).
         station: a built station with the simulated station's ports to use
             instead of ``build_station(station_config)``, e.g. the hardware
-            station (``drake_skill.station.hardware``); its ``realtime``
+            station (``drake_skill.station.hardware.station``); its ``realtime``
             attribute, when true, paces the simulator at real time.
         dmp: the DMP whose goal g and duration tau every rollout executes
             (default the skill's initial DMP, the one policy search starts

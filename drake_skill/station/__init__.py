@@ -1,14 +1,29 @@
-"""The station box: the simulated Panda, objects and camera behind one set of ports.
+"""The station box: the Panda, the object and the camera behind one set of ports.
 
-- ``config``: the scenario (``StationConfig``), loaded from the YAML files in
-  ``scenarios/`` or a user's own;
-- ``builder``: ``build_station(config)``, the station Diagram;
-- ``controller``: the end-effector controller (differential IK);
-- ``models``: where the SDFormat models live;
-- ``success``: the simulator's ground-truth success judges;
-- ``scripted``, ``pose_source``: scripted keyframe motions and the source that plays them;
-- ``simulation``: ``StationSimulation``, build once / reset / run, and the one
-  recording loop.
+Two stations satisfy one contract (``interface.StationInterface``); the rest of
+the system sees only its ports:
 
-Every module here builds on Drake: the station *is* the plant.
+- ``sim/``: the simulated station.
+  - ``sim.builder``: ``build_station(config)``, the MultibodyPlant diagram;
+  - ``sim.simulation``: ``StationSimulation``, build once / reset / run;
+  - ``sim.lcm_robot``: a simulated Panda behind the Panda driver's LCM
+    protocol, the stand-in robot the hardware port is tested against.
+- ``hardware/``: the real robot.
+  - ``hardware.station``: ``build_hardware_station(config)``, the same ports
+    backed by the Panda driver over LCM and a camera;
+  - ``hardware.config``: its configuration (channels, safety, camera).
+
+Shared by both:
+
+- ``interface``: the contract (ports and their types);
+- ``config``: the scenario (``StationConfig``), loaded from ``scenarios/`` or a
+  user's own file;
+- ``recording``: ``StationRecorder``, the one loop that advances and samples a
+  station, and the errors that end a run early;
+- ``controller``, ``limits``, ``reflex``: the end-effector controller, the
+  Panda's limits and the collision reflex;
+- ``camera``: the object camera's crop; ``models``: where the model files live;
+- ``success``: the ground-truth success judges;
+- ``scripted``, ``pose_source``: keyframed hand motions and the source that plays them;
+- ``records``: Drake loggers of what a run records.
 """

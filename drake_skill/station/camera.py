@@ -227,7 +227,7 @@ def _obb_corners(shape, X_BG: RigidTransform) -> np.ndarray:
 
 def object_swept_points(station, n_joint: int = 45, n_yaw: int = 5) -> np.ndarray:
     """World points (M, 3) [m] bounding every place the object's perception geometry can take
-    (see the module docstring). ``station`` is a :class:`~drake_skill.station.builder.Station`
+    (see the module docstring). ``station`` is a :class:`~drake_skill.station.sim.builder.Station`
     under construction (its plant finalised)."""
     plant, inspector = station.plant, station.scene_graph.model_inspector()
     obj, joint, o = station.object_instance, station.object_joint, station.config.object

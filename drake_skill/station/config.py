@@ -523,7 +523,7 @@ def _check_object_model(config: StationConfig, url: str) -> None:
     from pydrake.multibody.parsing import Parser
     from pydrake.multibody.plant import MultibodyPlant
 
-    from drake_skill.station.builder import object_parts
+    from drake_skill.station.sim.builder import object_parts
     from drake_skill.station.models import add_package_paths
 
     plant = MultibodyPlant(0.0)

@@ -2,8 +2,8 @@
 
 Everything above the station (the skill's diagram, the rollout runner, the
 recorders, the segmenter) talks to a station only through this contract, so
-a skill runs unchanged in simulation (:class:`drake_skill.station.builder.Station`)
-and on the robot (:class:`drake_skill.station.hardware.HardwareStation`);
+a skill runs unchanged in simulation (:class:`drake_skill.station.sim.builder.Station`)
+and on the robot (:class:`drake_skill.station.hardware.station.HardwareStation`);
 ``tests/test_hardware.py`` checks both against it. Ports (docs/architecture.md):
 
     inputs   ee_pose_desired      RigidTransform X_WE of the hand's TCP [m]

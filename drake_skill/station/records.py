@@ -29,7 +29,7 @@ import dataclasses as dc
 import numpy as np
 from pydrake.systems.primitives import LogVectorOutput
 
-from drake_skill.station.simulation import pose_to_vector
+from drake_skill.station.recording import pose_to_vector
 
 __all__ = ["StationLoggers", "StationRecords"]
 

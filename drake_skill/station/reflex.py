@@ -20,8 +20,8 @@ since the recorder last took it in discrete state. The update runs every
 ``period`` s (the plant's step in simulation: the contact results change
 only then) and, when the reflex trips, returns a termination status: the
 simulator's ``AdvanceTo`` returns at that instant and
-``drake_skill.station.simulation.StationRecorder`` raises
-:class:`~drake_skill.station.simulation.ReflexError` from the state.
+``drake_skill.station.recording.StationRecorder`` raises
+:class:`~drake_skill.station.recording.ReflexError` from the state.
 """
 
 from __future__ import annotations

@@ -1,29 +1,19 @@
-"""Build once, reset and re-simulate; the one loop that records the station.
-
-``StationSimulation`` wires a :class:`~drake_skill.station.Station` to a
-:class:`~drake_skill.station.pose_source.PoseTrajectorySource` in one diagram, with one
-Simulator and one Context that every run reuses:
-
-    sim = StationSimulation(scenario_for_skill("open"))
-    X_WO = sim.reset(seed=3)            # defaults + object pose drawn from the seed
-    log = sim.run(plan, duration=8.0)   # records the hand pose and object state
+"""The one loop that advances and records a station, simulated or hardware.
 
 :class:`StationRecorder` is the only code that advances and samples a
-station: ``StationSimulation.run``, the scripted demonstrator, the Meshcat
-teleoperation and the rollout runner all use it (:func:`record_station`
-wraps it for a plain recording without frames), so they share one sampling
-grid, one divergence test, one collision reflex and, with perception, the
-object points of the ``ObjectSegmenter`` system wired in the diagram (the
-same points and the same invalid-frame rule as skill executions: an invalid
-frame holds the last valid one).
+station: ``StationSimulation.run`` (``drake_skill.station.sim.simulation``), the
+scripted demonstrator, the Meshcat teleoperation, the rollout runner and the
+hardware port's recordings all use it (:func:`record_station` wraps it for a
+plain recording without frames), so they share one sampling grid, one
+divergence test, one collision reflex and, with perception, the object points
+of the ``ObjectSegmenter`` system wired in the diagram (the same points and the
+same invalid-frame rule as skill executions: an invalid frame holds the last
+valid one).
 
 A run ends early with an exception (all ``RuntimeError``): :class:`ReflexError`
 (the collision reflex: robot-scene contact force or external joint torque
 over ``config.reflex``), :class:`SolverError` (the contact solver did not
 converge) or :class:`DivergedError` (non-finite or runaway joint states).
-
-The same seed gives bit-identical trajectories (the plant is discrete, the
-controllers are discrete, and the randomisation reads only the seed).
 """
 
 from __future__ import annotations
@@ -33,13 +23,9 @@ import math
 
 import numpy as np
 from pydrake.math import RigidTransform
-from pydrake.systems.analysis import Simulator, SimulatorStatus
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.analysis import SimulatorStatus
 
-from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
-from drake_skill.station.builder import Station, build_station
-from drake_skill.station.config import StationConfig
-from drake_skill.station.success import judge_run, judge_success
+from drake_skill.station.interface import StationInterface
 
 
 _TERMINATED = SimulatorStatus.ReturnReason.kReachedTerminationCondition
@@ -166,7 +152,7 @@ class StationRecorder:
     ``force`` is the monitor's peak filtered force over the interval ending at it.
     """
 
-    def __init__(self, station: Station, root_context, simulator, record_hz: float = 100.0,
+    def __init__(self, station: StationInterface, root_context, simulator, record_hz: float = 100.0,
                  frame_hz: float | None = None, segmenter=None):
         self.station = station
         self.simulator = simulator
@@ -295,101 +281,3 @@ def record_station(simulator, station, root_context, t0: float, n: int, record_h
     recorder.anchor()
     recorder.record(n)
     return np.array(recorder.times), np.array(recorder.X_WE), np.array(recorder.q), np.array(recorder.obj)
-
-
-class StationSimulation:
-    """One station diagram, one simulator, reused for every run.
-
-    perceive: wire an ``ObjectSegmenter`` to the camera (``self.segmenter``),
-    for recordings with perception (needs ``config.enable_camera``).
-    """
-
-    def __init__(self, config: StationConfig | None = None, meshcat=None, perceive: bool = False):
-        builder = DiagramBuilder()
-        self.station: Station = builder.AddNamedSystem("station", build_station(config, meshcat))
-        self.config = self.station.config
-        self.source = builder.AddNamedSystem("plan", PoseTrajectorySource())
-        builder.Connect(self.source.GetOutputPort("X_WE_desired"),
-                        self.station.GetInputPort("ee_pose_desired"))
-        builder.Connect(self.source.GetOutputPort("gripper_command"),
-                        self.station.GetInputPort("gripper_command"))
-        self.segmenter = None
-        if perceive:
-            if not self.config.enable_camera:
-                raise ValueError("perceive=True needs a station with enable_camera = true")
-            from drake_skill.perception.systems import add_object_segmenter
-            self.segmenter = add_object_segmenter(builder, self.station)
-        self.diagram = builder.Build()
-        self.context = self.diagram.CreateDefaultContext()
-        self.simulator = Simulator(self.diagram, self.context)
-        self.meshcat = meshcat
-        self._X_WO = self.reset(None)
-
-    @property
-    def X_WO(self) -> RigidTransform:
-        """Ground-truth object pose of the current run."""
-        return self._X_WO
-
-    def station_context(self):
-        return self.station.GetMyContextFromRoot(self.context)
-
-    def reset(self, seed: int | None = None) -> RigidTransform:
-        """Context back to its defaults; object pose drawn from ``seed``. Returns X_WO."""
-        self.diagram.SetDefaultContext(self.context)
-        self.context.SetTime(0.0)
-        self._X_WO = self.station.reset(self.context, seed)
-        home = self.station.GetOutputPort("ee_pose").Eval(self.station_context())
-        self.source.set_plan(self.source.GetMyMutableContextFromRoot(self.context),
-                             hold_plan(home, self.config.gripper_home))
-        self.simulator.Initialize()
-        # Process the events due at t = 0 (periodic perception systems sample
-        # their first frame then) before the first step.
-        self.simulator.AdvanceTo(0.0)
-        return self._X_WO
-
-    def home_pose(self) -> RigidTransform:
-        """X_WE of the hand at the home joint positions."""
-        return self.station.GetOutputPort("ee_pose").Eval(self.station_context())
-
-    def set_plan(self, plan: PosePlan) -> None:
-        self.source.set_plan(self.source.GetMyMutableContextFromRoot(self.context), plan)
-        self.simulator.Initialize()
-
-    def plan(self) -> PosePlan:
-        return self.source.plan(self.source.GetMyContextFromRoot(self.context))
-
-    def object_state(self) -> float:
-        return float(self.station.GetOutputPort("object_state").Eval(self.station_context())[0])
-
-    def ee_pose(self) -> RigidTransform:
-        return self.station.GetOutputPort("ee_pose").Eval(self.station_context())
-
-    def recorder(self, record_hz: float = 100.0, frame_hz: float | None = None) -> StationRecorder:
-        """A recorder of this simulation (with the segmenter when built with perceive=True
-        and ``frame_hz`` is given)."""
-        segmenter = self.segmenter if frame_hz is not None else None
-        return StationRecorder(self.station, self.context, self.simulator, record_hz, frame_hz, segmenter)
-
-    def run(self, plan: PosePlan | None, duration: float, record_hz: float = 100.0) -> RunLog:
-        """Plays ``plan`` (None: keep the current one) for ``duration`` s from the
-        current time, recording at ``record_hz``; raises DivergedError,
-        ReflexError or SolverError (see the module docstring)."""
-        if plan is not None:
-            self.set_plan(plan)
-        if duration <= 0:
-            raise ValueError(f"duration must be positive, got {duration}")
-        recorder = self.recorder(record_hz)
-        recorder.anchor()
-        recorder.record(int(round(duration * record_hz)))
-        return recorder.run_log(self._X_WO)
-
-    def judge(self, object_state: float | None = None) -> bool:
-        """Ground-truth verdict of the scenario's success rule (its skill's) on the
-        final object state alone (see also :meth:`judge_log`)."""
-        value = self.object_state() if object_state is None else object_state
-        return judge_success(value, self.config.success)
-
-    def judge_log(self, log: RunLog) -> bool:
-        """Ground-truth verdict of a run: the final object state, judged only if the
-        hand touched nothing in the run's last ``success.settle_time`` s."""
-        return judge_run(log.times, log.object_state, log.contact_force, self.config.success)

@@ -1,6 +1,6 @@
 """A simulated Panda that speaks the drake-franka-driver's LCM protocol.
 
-The simulated station (``drake_skill.station.builder``, with its joint
+The simulated station (``drake_skill.station.sim.builder``, with its joint
 impedance set points as the input) behind Drake's driver-side systems::
 
     LCM PANDA_COMMAND --> [PandaCommandReceiver] --> [driver checks] --> [q, v] --> Station (plant, object, camera)
@@ -45,8 +45,8 @@ from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubsc
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, StateInterpolatorWithDiscreteDerivative
 from pydrake.systems.sensors import ImageToLcmImageArrayT
 
-from drake_skill.station.builder import Station
-from drake_skill.station.hardware_config import HardwareConfig, validate_hardware_config
+from drake_skill.station.sim.builder import Station
+from drake_skill.station.hardware.config import HardwareConfig, validate_hardware_config
 from drake_skill.station.success import judge_success
 
 N_JOINTS = 7
@@ -165,7 +165,7 @@ def _joint_command_station(station_config, meshcat) -> Station:
     in the controller's place (so nothing of the station is duplicated), and
     its ``ee_pose_desired`` input (:data:`JOINT_COMMAND_PORT`) then carries [q, v].
     """
-    from drake_skill.station import builder as station_builder
+    from drake_skill.station.sim import builder as station_builder
 
     with _BUILD_LOCK:
         original = station_builder.EndEffectorController

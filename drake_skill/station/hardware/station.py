@@ -2,7 +2,7 @@
 
 ``build_hardware_station(config)`` returns a :class:`HardwareStation`, a Diagram
 exporting the same ports (names and value types) as ``build_station`` (see
-``drake_skill.station.builder``), so the systems around the station (DMP,
+``drake_skill.station.sim.builder``), so the systems around the station (DMP,
 segmenter, PCAE, reward) and the rollout runner do not know which one they
 hold (docs/architecture.md, "One diagram per skill execution"; the pattern of
 ``MakeHardwareStation`` in the ``manipulation`` course)::
@@ -41,7 +41,7 @@ Safety lives here, not in the caller's hands:
   kReflex), which stops the station; and :meth:`HardwareStation.robot_scene_contact`
   gives the measured external joint torques (the driver's
   ``joint_torque_external``) to the same check that decides the reflex in
-  simulation (the recorder's monitor in ``drake_skill.station.simulation``,
+  simulation (the recorder's monitor in ``drake_skill.station.recording``,
   on the scenario's ``reflex`` limits).
 
 The station's simulator must run in real time (``realtime`` is True; the
@@ -75,10 +75,10 @@ from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubsc
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource, Multiplexer
 from pydrake.systems.sensors import PixelType
 
-from drake_skill.station import simulation as _simulation
-from drake_skill.station.builder import Station
+from drake_skill.station import recording as _recording
+from drake_skill.station.sim.builder import Station
 from drake_skill.station.controller import EndEffectorController, make_control_plant
-from drake_skill.station.hardware_config import HardwareConfig, validate_hardware_config
+from drake_skill.station.hardware.config import HardwareConfig, validate_hardware_config
 from drake_skill.station.reflex import add_reflex_monitor
 
 N_JOINTS = 7
@@ -100,7 +100,7 @@ class StaleStatusError(RuntimeError):
 
 
 #: The collision reflex's error, the simulated station's.
-ReflexError = _simulation.ReflexError
+ReflexError = _recording.ReflexError
 
 
 def wall_clock_utime() -> int:
@@ -328,7 +328,7 @@ class _ObjectModel:
         from pydrake.multibody.parsing import Parser
         from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 
-        from drake_skill.station.builder import object_parts
+        from drake_skill.station.sim.builder import object_parts
         from drake_skill.station.models import add_package_paths
 
         builder = DiagramBuilder()
@@ -415,7 +415,7 @@ def camera_geometry(station_config):
         X_BC = color.core().sensor_pose_in_camera_body()
         return color.core().intrinsics(), X_PB @ X_BC
     from drake_skill.common import look_at
-    from drake_skill.station.builder import kinect_camera_info
+    from drake_skill.station.sim.builder import kinect_camera_info
 
     return kinect_camera_info(camera), RigidTransform(look_at(camera.position, camera.target))
 
