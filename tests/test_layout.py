@@ -56,3 +56,36 @@ def test_the_probe_really_blocks_pydrake():
 def test_math_module_imports_without_pydrake(module):
     result = subprocess.run([sys.executable, "-c", _PROBE, module], capture_output=True, text=True)
     assert result.returncode == 0, f"{module} needs pydrake:\n{result.stderr[-2000:]}"
+
+
+def _station_imports(folder: str) -> dict[str, set[str]]:
+    """{module file: the drake_skill.station modules it imports} for station/FOLDER/*.py."""
+    import ast
+
+    found = {}
+    for path in sorted((PACKAGE / "station" / folder).glob("*.py")):
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names.add(node.module)
+                names.update(f"{node.module}.{a.name}" for a in node.names)
+            elif isinstance(node, ast.Import):
+                names.update(a.name for a in node.names)
+        found[path.name] = {n for n in names if n.startswith("drake_skill.station")}
+    return found
+
+
+def test_hardware_and_simulation_stations_stand_apart():
+    """station/hardware never imports station/sim: the hardware port runs without the
+    simulated station; both build on the shared station modules (issue 29 item 6)."""
+    hardware = _station_imports("hardware")
+    assert "station.py" in hardware and "config.py" in hardware
+    for name, imported in hardware.items():
+        assert not any(m.startswith("drake_skill.station.sim") for m in imported), (name, imported)
+    simulated = _station_imports("sim")
+    assert {"builder.py", "simulation.py", "lcm_robot.py"} <= set(simulated)
+    # The simulated station itself needs nothing of the hardware port; only the
+    # simulated robot behind the driver's protocol reads the hardware config's channels.
+    for name in ("builder.py", "simulation.py"):
+        assert not any(m.startswith("drake_skill.station.hardware") for m in simulated[name]), name
+    assert any(m.startswith("drake_skill.station.hardware.config") for m in simulated["lcm_robot.py"])

@@ -141,7 +141,8 @@ def bare_plant_ms_per_s(station_config, duration: float, repeats: int = 3) -> fl
     from pydrake.systems.framework import DiagramBuilder
     from pydrake.systems.primitives import ConstantVectorSource
 
-    from drake_skill.station.sim.builder import add_scene_plant, nominal_object_pose
+    from drake_skill.station.placement import nominal_object_pose
+    from drake_skill.station.sim.builder import add_scene_plant
 
     builder = DiagramBuilder()
     scene = add_scene_plant(builder, station_config)

@@ -519,11 +519,11 @@ def _validate_directives(config: StationConfig) -> None:
 
 def _check_object_model(config: StationConfig, url: str) -> None:
     """Parses the object's model alone (milliseconds): its base body, its joint and the
-    initial joint position within the joint's limits (``builder.object_parts``)."""
+    initial joint position within the joint's limits (``placement.object_parts``)."""
     from pydrake.multibody.parsing import Parser
     from pydrake.multibody.plant import MultibodyPlant
 
-    from drake_skill.station.sim.builder import object_parts
+    from drake_skill.station.placement import object_parts
     from drake_skill.station.models import add_package_paths
 
     plant = MultibodyPlant(0.0)

@@ -76,7 +76,7 @@ from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 from pydrake.systems.sensors import PixelType
 
 from drake_skill.station import recording as _recording
-from drake_skill.station.sim.builder import Station
+from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.controller import EndEffectorController, make_control_plant
 from drake_skill.station.hardware.config import HardwareConfig, validate_hardware_config
 from drake_skill.station.reflex import add_reflex_monitor
@@ -328,7 +328,6 @@ class _ObjectModel:
         from pydrake.multibody.parsing import Parser
         from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
 
-        from drake_skill.station.sim.builder import object_parts
         from drake_skill.station.models import add_package_paths
 
         builder = DiagramBuilder()
@@ -407,17 +406,11 @@ class RealSenseCamera(LeafSystem):  # pragma: no cover - needs a device
 
 # --------------------------------------------------------------------------- camera geometry
 def camera_geometry(station_config):
-    """(CameraInfo, X_WC) of the scenario's camera, as the simulated station renders it."""
-    camera = station_config.camera
-    if hasattr(camera, "MakeCameras"):        # Drake's CameraConfig
-        color, _ = camera.MakeCameras()
-        X_PB = camera.X_PB.GetDeterministicValue()
-        X_BC = color.core().sensor_pose_in_camera_body()
-        return color.core().intrinsics(), X_PB @ X_BC
-    from drake_skill.common import look_at
-    from drake_skill.station.sim.builder import kinect_camera_info
-
-    return kinect_camera_info(camera), RigidTransform(look_at(camera.position, camera.target))
+    """(CameraInfo, X_WC) of the scenario's camera (Drake's CameraConfig), as the
+    simulated station renders it."""
+    color, _ = station_config.camera.MakeCameras()
+    X_PB = station_config.camera.X_PB.GetDeterministicValue()
+    return color.core().intrinsics(), X_PB @ color.core().sensor_pose_in_camera_body()
 
 
 # --------------------------------------------------------------------------- the station
@@ -629,10 +622,10 @@ class HardwareStation(Diagram):
 
     # ------------------------------------------------------------------ object placement
     def nominal_object_pose(self) -> RigidTransform:
-        return Station.nominal_object_pose(self)      # the simulated station's formula, on self.config
+        return nominal_object_pose(self.config)
 
     def random_object_pose(self, seed: int) -> RigidTransform:
-        return Station.random_object_pose(self, seed)
+        return random_object_pose(self.config, seed)
 
     def camera_pose(self) -> RigidTransform:
         if not self.config.enable_camera:

@@ -56,7 +56,7 @@ from pydrake.geometry import (
     Role,
     RoleAssign,
 )
-from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import ModelDirectives, Parser, ProcessModelDirectives
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, PdControllerGains
@@ -70,6 +70,7 @@ from pydrake.common.value import AbstractValue, Value
 from drake_skill.station.controller import X_FLANGE_HAND, X_HAND_TCP, EndEffectorController, make_finger_limiter
 from drake_skill.station.models import add_package_paths, add_panda_illustration, model_url
 from drake_skill.station.config import StationConfig, validate_station_config
+from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor
 
 # The robot's and the table's collision geometries get these ContactConfig
@@ -128,12 +129,6 @@ class ScenePlant:
     robot_bodies: set
 
 
-def nominal_object_pose(config: StationConfig) -> RigidTransform:
-    """X_WO of the object's base at the scenario's nominal place on the table."""
-    o = config.object
-    return RigidTransform(RollPitchYaw(0.0, 0.0, o.yaw), [o.x, o.y, 0.0])
-
-
 def add_scene_plant(builder: DiagramBuilder, config: StationConfig) -> ScenePlant:
     """Adds the scenario's MultibodyPlant (``config.plant``) and SceneGraph to ``builder``:
     Panda + hand + table + object, every surface's contact parameters, the
@@ -186,30 +181,6 @@ def add_scene_plant(builder: DiagramBuilder, config: StationConfig) -> ScenePlan
     scene_graph.collision_filter_manager().Apply(
         CollisionFilterDeclaration().ExcludeWithin(GeometrySet(robot_geoms)))
     return ScenePlant(plant, scene_graph, arm, hand, obj, object_base, object_joint, robot_bodies)
-
-
-def object_parts(plant, obj, config: StationConfig):
-    """The object model's base body and its one articulated joint (``object.base_body``,
-    ``object.joint``); a name the model lacks, a joint with other than one position,
-    or an initial position outside the joint's limits is a ValueError naming the field."""
-    o = config.object
-    bodies = [plant.get_body(b).name() for b in plant.GetBodyIndices(obj)]
-    if o.base_body not in bodies:
-        raise ValueError(f"station config field 'object.base_body' = {o.base_body!r}: the model "
-                         f"'{o.model}' has no such body; expected one of {', '.join(bodies)}")
-    joints = [plant.get_joint(j).name() for j in plant.GetJointIndices(obj)]
-    if o.joint not in joints:
-        raise ValueError(f"station config field 'object.joint' = {o.joint!r}: the model '{o.model}' has no "
-                         f"such joint; expected one of {', '.join(joints) or '(none)'}")
-    joint = plant.GetJointByName(o.joint, obj)
-    if joint.num_positions() != 1:
-        raise ValueError(f"station config field 'object.joint' = {o.joint!r}: a {joint.type_name()} joint of "
-                         f"{joint.num_positions()} positions; expected a revolute or prismatic joint")
-    lo, hi = float(joint.position_lower_limits()[0]), float(joint.position_upper_limits()[0])
-    if not lo - 1e-9 <= o.initial_joint <= hi + 1e-9:
-        raise ValueError(f"station config field 'object.initial_joint' = {o.initial_joint!r}: expected a "
-                         f"position within the joint's limits [{lo}, {hi}]")
-    return plant.GetBodyByName(o.base_body, obj), joint
 
 
 def _set_contact_properties(plant, scene_graph, contact, obj) -> None:
@@ -405,11 +376,7 @@ class Station(Diagram):
 
     def random_object_pose(self, seed: int) -> RigidTransform:
         """The nominal pose perturbed uniformly by the configured translation and yaw noise."""
-        o = self.config.object
-        rng = np.random.default_rng(seed)
-        dx, dy = rng.uniform(-o.randomize_xy, o.randomize_xy, size=2)
-        dyaw = rng.uniform(-o.randomize_yaw, o.randomize_yaw)
-        return RigidTransform(RollPitchYaw(0.0, 0.0, o.yaw + dyaw), [o.x + dx, o.y + dy, 0.0])
+        return random_object_pose(self.config, seed)
 
     def set_object_pose(self, context, X_WO: RigidTransform) -> None:
         """Places the object's base frame O at X_WO and locks it there."""
