@@ -195,3 +195,20 @@ def test_the_grid_on_local_ray_gives_the_process_pool_numbers(grid, tmp_path):
     outcome = _grid(shared, tmp_path / "ray", use_ray=True)
     assert outcome.failed == [] and outcome.ran == 4
     assert (tmp_path / "ray" / "table.csv").read_bytes() == (out / "table.csv").read_bytes()
+
+
+def test_skills_are_names_or_skill_files(tmp_path):
+    """``--skills`` takes a shipped skill's name or a skill file; the grid goes by the
+    file's skill name, and one skill given twice is a one-line error."""
+    from drake_skill.skills.spec import SKILL_DIR
+
+    text = (SKILL_DIR / "open.yaml").read_text().replace("name: open", "name: my-open", 1)
+    (tmp_path / "my_open.yaml").write_text(text)
+    config = GridConfig(skills=(str(tmp_path / "my_open.yaml"), "close")).validate()
+    assert config.skills == ("my-open", "close")
+    assert config.sources == {"my-open": str(tmp_path / "my_open.yaml"), "close": "close"}
+    assert config.validate().skills == ("my-open", "close")          # validating twice changes nothing
+    with pytest.raises(ValueError, match=r"^--skills .*open\.yaml: skill 'open' is already given as open;"):
+        GridConfig(skills=("open", str(SKILL_DIR / "open.yaml"))).validate()
+    with pytest.raises(ValueError, match=r"^--skills .*nope\.yaml: skill file"):
+        GridConfig(skills=(str(tmp_path / "nope.yaml"),)).validate()

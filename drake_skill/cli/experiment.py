@@ -68,8 +68,8 @@ def _add_run_arguments(run_p: argparse.ArgumentParser) -> None:
 
     grid = run_p.add_argument_group("grid")
     grid.add_argument("--skills", nargs="+", default=["open", "close"], metavar="SKILL",
-                      help=f"shipped skills, some of {', '.join(shipped_skill_names())} (default open close: the "
-                           "thesis's simulation study)")
+                      help=f"shipped skills' names (some of {', '.join(shipped_skill_names())}) or skill files "
+                           "(default open close: the thesis's simulation study)")
     grid.add_argument("--methods", nargs="+", default=list(METHODS), metavar="METHOD",
                       help=f"some of {', '.join(METHODS)} (default all)")
     grid.add_argument("--rewards", nargs="+", default=list(REWARDS), metavar="REWARD",

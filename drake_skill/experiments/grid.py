@@ -63,12 +63,31 @@ def _choices(flag: str, given, allowed, what: str) -> tuple[str, ...]:
     return given
 
 
+def _skill_sources(given) -> dict[str, str]:
+    """{skill name: the shipped name or skill file given for it} of ``--skills``; the
+    grid's folders and table rows go by the name in the skill file."""
+    from drake_skill.skills import load_skill
+
+    sources: dict[str, str] = {}
+    for entry in given:
+        try:
+            name = load_skill(entry).name
+        except (FileNotFoundError, ValueError) as e:
+            raise ValueError(f"--skills {entry}: {e}") from None
+        if name in sources:
+            raise ValueError(f"--skills {entry}: skill '{name}' is already given as {sources[name]}; "
+                             "give each skill once")
+        sources[name] = str(entry)
+    return sources
+
+
 @dc.dataclass
 class GridConfig:
     """The grid and the settings of every run in it.
 
-    skills, methods, rewards: the cells (shipped skills' names,
-      ``policy_search.METHODS``, ``loop.REWARDS``).
+    skills, methods, rewards: the cells (shipped skills' names or skill files,
+      ``policy_search.METHODS``, ``loop.REWARDS``); after :meth:`validate`,
+      ``skills`` holds the skills' names and ``sources`` what was given for each.
     runs: independent runs per cell, seeds ``seed0 .. seed0 + runs - 1``.
     episodes, rollouts: the budget E x C (PoWER: E x C episodes of 1 rollout).
     held_out: held-out object poses [count] for success before (once per
@@ -88,12 +107,12 @@ class GridConfig:
     held_out_seed0: int = HELD_OUT_SEED0
     seed0: int = 0
     keep_skills: bool = False
+    sources: dict[str, str] = dc.field(default_factory=dict)
 
     def validate(self) -> "GridConfig":
         """Raises a one-line ValueError naming the flag and the fix; returns self."""
-        from drake_skill.skills import shipped_skill_names
-
-        self.skills = _choices("--skills", self.skills, shipped_skill_names(), "shipped skill")
+        self.sources = _skill_sources(self.sources.get(s, s) for s in self.skills)
+        self.skills = tuple(self.sources)
         self.methods = _choices("--methods", self.methods, METHODS, "method")
         self.rewards = _choices("--rewards", self.rewards, REWARDS, "reward")
         for flag, value, least in (("--runs", self.runs, 1), ("--episodes", self.episodes, 1),
@@ -250,23 +269,23 @@ def execute_task(task: GridTask) -> dict:
 
 
 # ----------------------------------------------------------------------- planning
-def prepare_skills(out: Path, skills, *, skill_dir: Path | None = None, station_yaml: Path | None = None,
-                   quiet: bool = False) -> dict[str, Path]:
+def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None = None,
+                   station_yaml: Path | None = None, quiet: bool = False) -> dict[str, Path]:
     """Each skill's fitted skill ``OUT/SKILL/initial_skill``: recorded and fitted once
     (``drake-skill learn``'s :func:`~drake_skill.cli.learn.prepare_skill`), or copied
-    from ``skill_dir`` (one skill only)."""
+    from ``skill_dir`` (one skill only). ``sources``: {name: shipped name or skill file}."""
     import argparse
 
     from drake_skill.cli.learn import prepare_skill
     from drake_skill.skill import Skill
 
     dirs = {}
-    for skill in skills:
+    for skill, source in sources.items():
         initial = Path(out) / skill / "initial_skill"
         if skill_dir is not None:
             _copy_skill(Path(skill_dir), initial, skill)
         else:
-            args = argparse.Namespace(skill=skill, skill_dir=None, demos=None, station_config=station_yaml,
+            args = argparse.Namespace(skill=source, skill_dir=None, demos=None, station_config=station_yaml,
                                       quiet=quiet)
             prepare_skill(args, Path(out) / skill)
         if Skill.load(initial).name != skill:
@@ -408,9 +427,10 @@ def _runner_specs(out: Path, config: GridConfig, skill_dir, station_yaml, rollou
 
     if skill_dir is not None and len(config.skills) != 1:
         raise ValueError(f"--skill-dir {skill_dir}: one fitted skill serves one skill; give one skill in --skills")
-    dirs = prepare_skills(out, config.skills, skill_dir=skill_dir, station_yaml=station_yaml, quiet=quiet)
+    dirs = prepare_skills(out, config.sources, skill_dir=skill_dir, station_yaml=station_yaml, quiet=quiet)
     rollout_config = (rollout_config or RolloutConfig()).validate()
-    return {s: RunnerSpec.create(dirs[s], station_config(s, station_yaml), rollout_config) for s in config.skills}
+    return {s: RunnerSpec.create(dirs[s], station_config(config.sources[s], station_yaml), rollout_config)
+            for s in config.skills}
 
 
 def _progress(tasks, failed: list, done: dict, enabled: bool):
