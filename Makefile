@@ -4,7 +4,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 PYTHON ?= python3
 
-.PHONY: setup demo test bench mutation constraints clean-venv
+.PHONY: setup demo test bench notebooks mutation constraints clean-venv
 
 setup: $(STAMP)
 
@@ -27,6 +27,13 @@ test: setup
 
 bench: setup
 	$(PY) tools/bench_station.py
+
+# JupyterLab on notebooks/ (pyproject.toml's `notebooks` extra; not needed by the tests,
+# which execute the notebooks with nbclient). On a remote machine: make notebooks LAB_ARGS="--no-browser --ip 127.0.0.1".
+LAB_ARGS ?=
+notebooks: setup
+	$(PY) -m pip install -q -c constraints.txt -e '.[notebooks]'
+	$(VENV)/bin/jupyter lab notebooks/ $(LAB_ARGS)
 
 # Mutation testing (mutmut, configured in pyproject.toml [tool.mutmut]); not part of
 # `make test` nor CI: hours on two cores. One mutmut run per module (MUTATE=...

@@ -19,7 +19,8 @@ def quiet_differential_ik():
 def pytest_collection_modifyitems(config, items):
     """Under pytest-xdist (``make test``: ``-n 2 --dist loadgroup``), each test file runs
     on one worker, so its module fixtures (a fitted skill, a grid) are built once;
-    test_physics's long, independent checks (cheap fixtures) spread over the workers."""
+    test_physics's long, independent checks and the notebooks (no shared fixtures)
+    spread over the workers."""
     for item in items:
-        if item.path.name != "test_physics.py":
+        if item.path.name not in ("test_physics.py", "test_notebooks.py"):
             item.add_marker(pytest.mark.xdist_group(item.path.stem))

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Installs the Debian packages drake-skill needs at run time (open3d links
-# libusb-1.0), with apt-get when running as root; otherwise says what to run.
+# libusb-1.0; the notebooks render Drake diagrams with graphviz's dot), with
+# apt-get when running as root; otherwise says what to run.
 set -euo pipefail
 missing=()
-for pkg in libusb-1.0-0; do
+for pkg in libusb-1.0-0 graphviz; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
 done
 [ ${#missing[@]} -eq 0 ] && exit 0
