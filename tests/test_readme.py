@@ -66,15 +66,20 @@ def test_the_documents_have_commands_and_code():
     assert any(not long for _, _, long, _ in blocks("python"))
 
 
+@pytest.fixture(scope="module")
+def parser():
+    return build_parser()
+
+
 @pytest.mark.parametrize("words", [w for _, w in COMMANDS], ids=[name for name, _ in COMMANDS])
-def test_command_parses(words):
+def test_command_parses(words, parser):
     argv = drake_skill_argv(words)
     if words[0] == "make":
         targets = re.findall(r"^([\w-]+):", (ROOT / "Makefile").read_text(), re.M)
         assert words[1] in targets, f"the Makefile has no target {words[1]!r}"
         return
     try:
-        build_parser().parse_args(argv)
+        parser.parse_args(argv)
     except SystemExit as e:           # --help
         assert e.code in (0, None)
     except UsageError as e:
