@@ -66,10 +66,13 @@ class StationInterface(Protocol):
 
 
 def port_signature(port) -> tuple[str, object]:
-    """(data type name, size or abstract value type name) of a Drake port."""
+    """(data type name, size or abstract value type name) of a Drake port; template
+    types read as pydrake prints them (``Image[PixelType.kRgba8U]``)."""
+    from pydrake.common import pretty_class_name
+
     kind = port.get_data_type().name
     if kind == "kAbstractValued":
-        return kind, type(port.Allocate().get_value()).__name__
+        return kind, pretty_class_name(type(port.Allocate().get_value()))
     return kind, port.size()
 
 
