@@ -70,6 +70,18 @@ def load_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
         raise ValueError(f"{path}: not a readable numpy .npz archive ({e})") from e
 
 
+def new_figure(figsize, dpi: float = 100):
+    """A matplotlib Figure on its own Agg canvas, outside pyplot: library code draws
+    on it without switching the caller's backend (a notebook keeps its inline
+    plots) or registering it with pyplot (nothing to close)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=figsize, dpi=dpi)
+    FigureCanvasAgg(fig)
+    return fig
+
+
 def write_figure_png(fig, path: str | os.PathLike, **savefig_kwargs) -> Path:
     """Renders a matplotlib figure to PNG and writes it to ``path`` atomically.
 

@@ -1,7 +1,7 @@
 """A small fitted skill shared by the learning tests (built once per pytest session).
 
 Two scripted Close demonstrations recorded with a 160 x 120 camera (the
-segmenter, PCAE and reward see the same scene at a quarter of the pixels),
+segmenter, PCAE and reward see the same scene at a sixteenth of the pixels),
 fitted with the thesis' settings, and the DMPs' duration shortened to
 ``TAU`` s so that a rollout simulates ``TAU`` + ``SETTLE`` s. The folder
 lives under pytest's session temp root (the run's, under pytest-xdist), guarded

@@ -89,3 +89,29 @@ def test_return_plot(tmp_path):
     with pytest.raises(ValueError, match="period"):
         plot_return(h, tmp_path / "x.png", period=0)
     assert not (tmp_path / "x.png").exists()
+
+
+def test_library_plots_leave_the_callers_matplotlib_alone(tmp_path):
+    """The library draws on Figures of its own (fileio.new_figure): a notebook's backend
+    stays as it was and pyplot holds no figure of the library's afterwards."""
+    import subprocess
+    import sys
+
+    script = f"""
+import matplotlib
+matplotlib.use("svg")
+import matplotlib.pyplot as plt
+import numpy as np
+from pathlib import Path
+from drake_skill.learning.plots import plot_learning_curve, plot_outcomes_by_placement
+from drake_skill.reward.plots import plot_return
+out = Path({str(tmp_path)!r})
+curve = [dict(episode=e, greedy_success=e > 0, greedy_return=10.0 * e, rollouts=6 * e) for e in range(3)]
+plot_learning_curve(curve, out / "curve.png", title="t")
+plot_return(np.ones(10), out / "ret.png")
+assert matplotlib.get_backend() == "svg", matplotlib.get_backend()
+assert plt.get_fignums() == [], plt.get_fignums()
+assert (out / "curve.png").read_bytes()[:8] == b"\\x89PNG\\r\\n\\x1a\\n"
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]

@@ -93,6 +93,7 @@ def test_a_bad_skill_file_is_one_line_naming_the_file_and_the_field(tmp_path, ch
         load_skill(path)
     message = str(raised.value)
     assert "\n" not in message and str(path) in message and field in message, message
+    assert message.count(str(path)) == 1, f"the file named twice: {message}"
 
 
 def test_keyframes_beyond_the_reach_name_the_distance(tmp_path):

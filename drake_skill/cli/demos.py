@@ -108,11 +108,9 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _plot(demos, path: Path) -> Path:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from drake_skill.fileio import new_figure
 
-    fig = plt.figure(figsize=(12, 4.2))
+    fig = new_figure((12, 4.2))
     ax3 = fig.add_subplot(1, 3, 1, projection="3d")
     ax_xz = fig.add_subplot(1, 3, 2)
     ax_obj = fig.add_subplot(1, 3, 3)
@@ -147,7 +145,6 @@ def _plot(demos, path: Path) -> Path:
     ax_obj.legend(fontsize=8)
     fig.tight_layout()
     written = write_figure_png(fig, path, dpi=100)
-    plt.close(fig)
     return written
 
 

@@ -28,9 +28,7 @@ NAME = "station-demo"
 HELP = "scripted Open/Close/Draw in the simulated station"
 
 def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, scenario: Path | None = None) -> dict:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from drake_skill.fileio import new_figure
 
     from drake_skill.station.scripted import scripted_plan
     from drake_skill.station.sim.simulation import StationSimulation
@@ -63,14 +61,15 @@ def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, 
             "wall_s": round(time.perf_counter() - start, 2),
         }
         logs[skill] = (log, parked)
-        fig = plt.figure(figsize=(6.4, 4.8))
-        plt.imshow(image)
-        plt.axis("off")
-        plt.title(f"{skill}: camera view at the end")
+        fig = new_figure((6.4, 4.8))
+        ax = fig.subplots()
+        ax.imshow(image)
+        ax.axis("off")
+        ax.set_title(f"{skill}: camera view at the end")
         write_figure_png(fig, out / f"camera_{skill}.png", dpi=110, bbox_inches="tight")
-        plt.close(fig)
 
-    fig, axes = plt.subplots(1, len(skills), figsize=(4.2 * len(skills), 3.4), squeeze=False)
+    fig = new_figure((4.2 * len(skills), 3.4))
+    axes = fig.subplots(1, len(skills), squeeze=False)
     for ax, skill in zip(axes[0], skills):
         log, parked = logs[skill]
         ax.plot(log.times, log.object_state, label="scripted")
@@ -82,7 +81,6 @@ def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, 
         ax.legend()
     fig.tight_layout()
     write_figure_png(fig, out / "object_state.png", dpi=110, bbox_inches="tight")
-    plt.close(fig)
     atomic_write_json(out / "summary.json", summary)
     return summary
 

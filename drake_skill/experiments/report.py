@@ -257,26 +257,20 @@ def _axes_style(ax, title: str) -> None:
 
 
 def _save(fig, path: Path) -> Path:
-    import matplotlib.pyplot as plt
-
     from drake_skill.fileio import write_figure_png
 
-    try:
-        return write_figure_png(fig, path, dpi=_DPI, metadata={"Software": None})
-    finally:
-        plt.close(fig)
+    return write_figure_png(fig, path, dpi=_DPI, metadata={"Software": None})
 
 
 def plot_methods(cells, skill: str, path: Path) -> Path:
     """One panel per method: mean greedy success +/- sd against episode, dense against sparse."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from drake_skill.fileio import new_figure
 
     methods = list(dict.fromkeys(c.method for c in cells if c.skill == skill))
     ncols = min(3, len(methods))
     nrows = math.ceil(len(methods) / ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), squeeze=False)
+    fig = new_figure((4.2 * ncols, 3.2 * nrows))
+    axes = fig.subplots(nrows, ncols, squeeze=False)
     for ax, method in zip(axes.flat, methods):
         for cell in (c for c in cells if c.skill == skill and c.method == method):
             dense = cell.reward == "dense"
@@ -292,11 +286,10 @@ def plot_methods(cells, skill: str, path: Path) -> Path:
 
 def plot_dense(cells, skill: str, path: Path) -> Path:
     """Every method with the dense reward on one plot."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from drake_skill.fileio import new_figure
 
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    fig = new_figure((6.4, 4.2))
+    ax = fig.subplots()
     dense = [c for c in cells if c.skill == skill and c.reward == "dense"]
     for i, cell in enumerate(dense):
         _band(ax, cell, cell.method, f"C{i}", alpha=0.08)

@@ -18,14 +18,11 @@ __all__ = ["plot_learning_curve", "plot_outcomes_by_placement"]
 
 def plot_learning_curve(curve: list[dict], path, title: str = "") -> Path:
     """Greedy success and returns per episode (0 = before learning) to a PNG."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from drake_skill.fileio import write_figure_png
+    from drake_skill.fileio import new_figure, write_figure_png
 
     episodes = [c["episode"] for c in curve]
-    fig, (ax_s, ax_r) = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig = new_figure((10, 3.8))
+    (ax_s, ax_r) = fig.subplots(1, 2)
     ax_s.plot(episodes, [float(c["greedy_success"]) for c in curve], "o-", color="tab:green")
     ax_s.set_ylim(-0.05, 1.05)
     ax_s.set_xlabel("episode (update)")
@@ -44,10 +41,7 @@ def plot_learning_curve(curve: list[dict], path, title: str = "") -> Path:
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    try:
-        return write_figure_png(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
+    return write_figure_png(fig, path, dpi=110)
 
 
 #: Marker and colour per rollout outcome in :func:`plot_outcomes_by_placement`.
@@ -65,11 +59,7 @@ def plot_outcomes_by_placement(report: dict[str, Any], path, title: str = "") ->
     Plain imitation of a DMP succeeds in a band of placements around its
     demonstration's (docs/method.md section 6): the plot shows the band.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from drake_skill.fileio import write_figure_png
+    from drake_skill.fileio import new_figure, write_figure_png
 
     if "policies" in report:
         panels = []
@@ -78,7 +68,8 @@ def plot_outcomes_by_placement(report: dict[str, Any], path, title: str = "") ->
             panels.append((f"DMP {index}{role}", p))
     else:
         panels = [(f"{len(report['seeds'])} exploratory rollouts", report)]
-    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.2), squeeze=False)
+    fig = new_figure((4.2 * len(panels), 4.2))
+    axes = fig.subplots(1, len(panels), squeeze=False)
     placed = np.array([1000.0 * np.asarray(pose[:2]) for _, p in panels
                        for pose in p.get("object_poses", []) if pose is not None]).reshape(-1, 2)
     centre = placed.mean(axis=0) if len(placed) else np.zeros(2)
@@ -117,7 +108,4 @@ def plot_outcomes_by_placement(report: dict[str, Any], path, title: str = "") ->
     fig.suptitle(title or f"{report['skill']}: outcome by object placement "
                           f"(object frame {report['object_pose']})", fontsize=11)
     fig.tight_layout(rect=(0, 0.07, 1, 1))
-    try:
-        return write_figure_png(fig, path, dpi=110)
-    finally:
-        plt.close(fig)
+    return write_figure_png(fig, path, dpi=110)

@@ -20,7 +20,7 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from drake_skill.fileio import write_figure_png
+from drake_skill.fileio import new_figure, write_figure_png
 from drake_skill.reward.mrp import expected_visit_times
 from drake_skill.reward.pomrp import Pomrp
 
@@ -31,15 +31,6 @@ TERMINAL_COLOR = "#2ca02c"  # green
 INITIAL_COLOR = "#1f77b4"  # blue
 STATE_COLOR = "#c7c7c7"  # grey
 _MIN_ARROW_P = 0.01  # transitions below this probability are not drawn
-
-
-def _figure(figsize):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=figsize, dpi=100)
-    FigureCanvasAgg(fig)
-    return fig
 
 
 def goal_graph_layout(pomrp: Pomrp, length: int | None = None) -> np.ndarray:
@@ -93,7 +84,7 @@ def plot_goal_model(pomrp: Pomrp, path, *, clouds: Sequence[np.ndarray] | Callab
     terminal = set(int(s) for s in pomrp.terminal_states)
     initial = set(int(s) for s in np.flatnonzero(gm.startprob_ >= 0.5 * gm.startprob_.max()))
 
-    fig = _figure((max(6.0, 1.8 * k + 1.5), 4.4 if clouds is not None else 3.0))
+    fig = new_figure((max(6.0, 1.8 * k + 1.5), 4.4 if clouds is not None else 3.0))
     ax = fig.add_axes([0.03, 0.02, 0.94, 0.62 if clouds is not None else 0.88])
     ax.set_aspect("equal")
     ax.axis("off")
@@ -177,7 +168,7 @@ def plot_return(rewards: np.ndarray | Mapping[str, np.ndarray], path, *, period:
         raise ValueError("rewards: expected at least one reward sequence")
     if not period > 0:
         raise ValueError(f"period: expected > 0 s, got {period}")
-    fig = _figure((7.0, 4.5))
+    fig = new_figure((7.0, 4.5))
     ax_h = fig.add_subplot(2, 1, 1)
     ax_r = fig.add_subplot(2, 1, 2, sharex=ax_h)
     for label, h in series.items():

@@ -226,7 +226,7 @@ def load_skill(skill) -> SkillSpec:
     try:
         check_with_scenario(spec, spec.station_config(), where)
     except ValueError as e:
-        if str(e).startswith(where):
+        if str(e).startswith((where, f"skill file {where}")):      # the skill file's own field
             raise
         raise ValueError(f"{where}: scenario {spec.scenario}: {e}") from None
     return spec
