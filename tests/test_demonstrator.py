@@ -141,12 +141,11 @@ def test_recorded_pose_is_the_measured_one(draw_demonstrator, monkeypatch):
 
 def test_record_many_retries_failed_variations(draw_demonstrator, monkeypatch):
     """Seeds whose variation fails are skipped and recorded as rejected."""
-    real = draw_demonstrator.record
+    demo = draw_demonstrator.record(2)      # one real recording, reused: this test is about the bookkeeping
     calls = []
 
     def record(seed):
         calls.append(seed)
-        demo = real(2)          # one real recording, reused: this test is about the bookkeeping
         return dc.replace(demo, seed=seed, success=seed % 3 != 0, metadata=dict(demo.metadata))
 
     monkeypatch.setattr(draw_demonstrator, "record", record)
