@@ -23,7 +23,7 @@ demo: setup
 	$(VENV)/bin/drake-skill learn --skill open --force
 
 test: setup
-	$(PY) -m pytest -q -n 2 --dist loadgroup
+	$(PY) -m pytest -q -n 2 --dist loadscope
 
 bench: setup
 	$(PY) tools/bench_station.py
