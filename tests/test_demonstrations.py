@@ -397,3 +397,122 @@ def test_interrupted_append_leaves_old_or_new(tmp_path, monkeypatch):
         if not state["fired"]:
             break
     assert not state["fired"] and outcomes[-1] and not outcomes[0] and len(outcomes) >= 4
+
+
+# ------------------------------------------------------------- mutation testing (docs/mutation.md)
+def test_fields_of_other_dtypes_are_named():
+    demo = make_demo(perception=False)
+    demo.q_100hz = np.zeros((121, 7), dtype=np.int64)
+    with pytest.raises(DemonstrationError, match=r"^demonstration: field 'q_100hz' has dtype int64; "
+                                                 r"expected a floating-point array$"):
+        demo.validate()
+    demo = make_demo(perception=False)
+    demo.gripper_100hz = [0.0] * 121
+    with pytest.raises(DemonstrationError, match=r"^here: field 'gripper_100hz' has dtype list; expected a floating"):
+        demo.validate("here")
+    demo = make_demo(perception=False)
+    demo.times = np.arange(13)
+    with pytest.raises(DemonstrationError, match=r"^demonstration: field 'times' has dtype int64; expected a floating"):
+        demo.validate()
+
+
+def test_10hz_times_match_raw_instants_up_to_rounding():
+    """times need not be bit-identical to times_100hz (another computation of the same instants)."""
+    demo = make_demo(perception=False)
+    for k, eps in [(0, 1e-12), (5, 1e-12), (6, -1e-12), (12, 1e-12), (12, -1e-12)]:
+        d = make_demo(perception=False)
+        d.times[k] += eps
+        d.validate()
+    demo.times[4] += 0.005  # half-way between two raw instants
+    with pytest.raises(DemonstrationError, match=r"^demonstration: field 'times' sample 4 \(0\.405000 s\) is not one "
+                                                 r"of the times_100hz instants; expected the 10 Hz times to be a "
+                                                 r"subset of the raw ones \(downsample_action\)$"):
+        demo.validate()
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("seed", np.array([1, 2]), r"has shape \(2,\) dtype int64; expected a scalar of kind 'iu'"),
+    ("seed", np.array(1.5), r"has shape \(\) dtype float64; expected a scalar of kind 'iu'"),
+    ("success", np.array(1), r"has shape \(\) dtype int64; expected a scalar of kind 'b'"),
+])
+def test_scalar_fields_are_checked_on_load(tmp_path, field, value, message):
+    arrays = make_demo(perception=False).to_arrays()
+    arrays[field] = value
+    path = _write_arrays(tmp_path / "demo_000.npz", arrays)
+    with pytest.raises(DemonstrationError, match=rf"^{re.escape(str(path))}: field '{field}' {message}$"):
+        load_demonstration(path)
+
+
+def test_file_and_folder_errors_say_what_to_do(tmp_path):
+    path = save_demonstration(make_demo(perception=False), tmp_path / "demo_000.npz")
+    with pytest.raises(FileExistsError, match=r"demo_000.npz exists; refusing to overwrite a recorded demonstration "
+                                              r"\(pass force=True / --force to replace it\)$"):
+        save_demonstration(make_demo(perception=False), path)
+    with pytest.raises(FileNotFoundError, match=r"^.*missing: no such directory$"):
+        load_demonstrations(tmp_path / "missing")
+    from drake_skill.demos.format import append_demonstration
+
+    with pytest.raises(NotADirectoryError, match=r"demo_000.npz: exists and is not a folder; choose a folder"):
+        append_demonstration(make_demo(perception=False), path)
+
+
+def test_manifest_contents_and_mismatch_messages(tmp_path):
+    from drake_skill.demos.format import MANIFEST, append_demonstration, save_demonstrations
+    from drake_skill.fileio import file_sha256
+
+    out = tmp_path / "open"
+    save_demonstrations([make_demo(0, perception=False), make_demo(1, perception=False)], out)
+    manifest = json.loads((out / MANIFEST).read_text())
+    assert manifest == {"schema": "drake-skill-demonstration-set",
+                        "files": {p.name: file_sha256(p) for p in sorted(out.glob("demo_*.npz"))}}
+    seen = []
+    append_demonstration(make_demo(2, perception=False), out,
+                         extra=lambda tmp: seen.extend(sorted(p.name for p in tmp.iterdir())))
+    assert seen == ["demo_000.npz", "demo_001.npz", "demo_002.npz"]  # extra sees the whole new set
+    manifest = json.loads((out / MANIFEST).read_text())
+    assert manifest["schema"] == "drake-skill-demonstration-set" and len(manifest["files"]) == 3
+    save_demonstration(make_demo(7, perception=False), out / "demo_001.npz", force=True)
+    with pytest.raises(DemonstrationError, match=r"demo_001\.npz: contents differ from the checksum in .*demos\.json; "
+                                                 r"the folder mixes recordings\. Record the set again "
+                                                 r"\(demos record --force\)$"):
+        load_demonstrations(out)
+    (out / "demo_001.npz").unlink()
+    with pytest.raises(DemonstrationError, match=r"do not match demos\.json \(missing \['demo_001\.npz'\], not listed "
+                                                 r"\[\]\); the folder mixes recordings\. Record the set again "
+                                                 r"\(demos record --force\)$"):
+        load_demonstrations(out)
+    (out / MANIFEST).write_text("not json")
+    with pytest.raises(DemonstrationError, match=r"demos\.json: not a drake-skill demonstration list \(.*\); delete it "
+                                                 r"if the folder was assembled by hand$"):
+        load_demonstrations(out)
+
+
+def test_set_errors_name_the_files(tmp_path):
+    from drake_skill.demos.format import append_demonstration, save_demonstrations
+
+    out = tmp_path / "open"
+    for i in range(4):
+        save_demonstration(make_demo(i, perception=False), demo_path(out, i))
+    with pytest.raises(FileExistsError, match=r"holds 4 demonstration file\(s\) \(demo_000\.npz, demo_001\.npz, "
+                                              r"demo_002\.npz, \.\.\.\); pass --force to replace them or choose "
+                                              r"another --out$"):
+        save_demonstrations([make_demo(9, perception=False)], out)
+    demo_path(out, 3).unlink()
+    with pytest.raises(FileExistsError, match=r"\(demo_000\.npz, demo_001\.npz, demo_002\.npz\); pass --force"):
+        save_demonstrations([make_demo(9, perception=False)], out)
+    bad = make_demo(9, perception=False)
+    bad.X_OE[2, 0] = np.nan
+    with pytest.raises(DemonstrationError, match=r"open/demo_001\.npz: field 'X_OE' contains NaN"):
+        save_demonstrations([make_demo(8, perception=False), bad], out, force=True)
+    with pytest.raises(DemonstrationError, match=r"open/demo_003\.npz: field 'X_OE' contains NaN"):
+        append_demonstration(bad, out)
+
+
+def test_a_stale_plot_is_not_carried_into_a_new_set(tmp_path):
+    from drake_skill.demos.format import save_demonstrations
+
+    out = tmp_path / "open"
+    save_demonstrations([make_demo(0, perception=False)], out, extra=lambda tmp: (tmp / "demos.png").write_bytes(b"x"))
+    assert (out / "demos.png").read_bytes() == b"x"
+    save_demonstrations([make_demo(1, perception=False)], out, force=True)
+    assert sorted(p.name for p in out.iterdir()) == ["demo_000.npz", "demos.json"]
