@@ -516,3 +516,57 @@ def test_a_stale_plot_is_not_carried_into_a_new_set(tmp_path):
     assert (out / "demos.png").read_bytes() == b"x"
     save_demonstrations([make_demo(1, perception=False)], out, force=True)
     assert sorted(p.name for p in out.iterdir()) == ["demo_000.npz", "demos.json"]
+
+
+def _set(**fields):
+    return lambda d: [setattr(d, k, v) for k, v in fields.items()]
+
+
+def _set_item(field, index, value):
+    return lambda d: getattr(d, field).__setitem__(index, value)
+
+
+@pytest.mark.parametrize("change, message", [
+    (_set(skill=""), r"field 'skill' is ''; expected a skill's name \(letters, digits, '_', '-'\)"),
+    (_set(skill=3), r"field 'skill' is 3; expected a skill's name"),
+    (_set(seed=True), r"field 'seed' is True; expected an integer"),
+    (_set(seed=1.0), r"field 'seed' is 1\.0; expected an integer"),
+    (_set(success=1), r"field 'success' is 1; expected a bool"),
+    (_set(final_object_state=float("nan")), r"field 'final_object_state' is nan; expected a finite number"),
+    (lambda d: setattr(d, "times_100hz", d.times_100hz[:, None]),
+     r"field 'times_100hz' has shape \(121, 1\); expected \(T,\)"),
+    (_set_item("times", 4, 0.3), r"field 'times' is not strictly increasing \(t\[3\] = 0\.3 s, t\[4\] = 0\.3 s\)"),
+    (lambda d: setattr(d, "q_100hz", d.q_100hz[:, :6]), r"field 'q_100hz' has shape \(121, 6\); expected \(121, 7\)"),
+    (_set(gripper_100hz=np.zeros(120)), r"field 'gripper_100hz' has shape \(120,\); expected \(121,\)"),
+    (_set(gripper_100hz=np.zeros(121, dtype=int)), r"field 'gripper_100hz' has dtype int64; expected a floating"),
+    (_set(object_state_100hz=np.zeros(120)), r"field 'object_state_100hz' has shape \(120,\); expected \(121,\)"),
+    (_set(object_state_100hz=np.zeros(121, dtype=int)), r"field 'object_state_100hz' has dtype int64; expected a"),
+    (_set_item("times", 0, -0.01), r"field 'times' spans -0\.010\.\.1\.200 s, outside times_100hz 0\.000\.\.1\.200 s"),
+    (_set_item("times", 12, 1.21), r"field 'times' spans 0\.000\.\.1\.210 s, outside times_100hz 0\.000\.\.1\.200 s"),
+    (_set_item("X_WO_true", 3, 2.0), r"field 'X_WO_true' has a quaternion of norm 2\.\d+ at sample 0; "
+                                     r"expected unit norm within 0\.001"),
+    (_set(perception_valid=None), r"field 'perception_valid' is missing while X_WO_start, object_points is present; "
+                                  r"perception fields come together"),
+    (_set(perception_valid=None, object_points=None), r"field 'object_points' is missing while X_WO_start is present"),
+    (_set_item("X_WO_start", 3, 2.0), r"field 'X_WO_start' has a quaternion of norm"),
+    (lambda d: setattr(d, "object_points", d.object_points[:, :, :2].copy()),
+     r"field 'object_points' has shape \(13, 2048, 2\) dtype float32; expected \(13, 2048, 3\) float32 \(2048 "
+     r"points per frame, docs/method\.md section 3\)"),
+    (lambda d: setattr(d, "object_points", d.object_points[:12]), r"field 'object_points' has shape \(12, 2048, 3\)"),
+    (_set(object_points=[[0.0]]), r"field 'object_points' has shape None dtype None; expected \(13, 2048, 3\)"),
+    (_set_item("object_points", (2, 5, 1), np.inf), r"field 'object_points' contains NaN or inf$"),
+    (_set(perception_valid=np.ones(13)), r"field 'perception_valid' has shape \(13,\) dtype float64; "
+                                         r"expected \(13,\) bool"),
+    (_set(perception_valid=np.ones(12, dtype=bool)), r"field 'perception_valid' has shape \(12,\) dtype bool"),
+    (_set(perception_valid=[True] * 13), r"field 'perception_valid' has shape None dtype None; expected \(13,\) bool"),
+])
+def test_each_invalid_field_is_named(change, message):
+    demo = make_demo()
+    change(demo)
+    with pytest.raises(DemonstrationError, match=rf"^somewhere: {message}"):
+        demo.validate("somewhere")
+
+
+def test_the_fewest_samples_are_valid():
+    demo = make_demo(perception=False, n=91)  # 91 raw samples, 10 at 10 Hz
+    assert demo.validate().n_samples == 10
