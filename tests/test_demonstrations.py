@@ -570,3 +570,97 @@ def test_each_invalid_field_is_named(change, message):
 def test_the_fewest_samples_are_valid():
     demo = make_demo(perception=False, n=91)  # 91 raw samples, 10 at 10 Hz
     assert demo.validate().n_samples == 10
+
+
+def test_clouds_flat_along_one_axis_are_valid_and_the_degenerate_frame_is_named():
+    demo = make_demo()
+    demo.object_points[3, :, 2] = 0.0  # a flat cloud (a lid seen from above): two wide axes are enough
+    demo.perception_valid[3] = True
+    demo.validate()
+    demo.object_points[6, :, :2] = 0.3
+    demo.object_points[6, :, 2] = np.linspace(0.0, 0.123456, 2048)
+    demo.perception_valid[6] = True
+    with pytest.raises(DemonstrationError, match=r"^demonstration: field 'object_points' frame 6 is marked valid "
+                                                 r"but its cloud is degenerate \(bounding box \[0\.0, 0\.0, "
+                                                 r"0\.123499\d*\] m; expected at least 0\.005 m along two axes\)"):
+        demo.validate()
+
+
+def test_metadata_must_be_json():
+    demo = make_demo(perception=False)
+    demo.metadata = {"when": object()}
+    with pytest.raises(DemonstrationError, match=r"^demonstration: field 'metadata' is not JSON-serialisable \("):
+        demo.validate()
+
+
+def test_downsample_action_rates():
+    t = np.arange(30) / 10.0
+    X = np.tile([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], (30, 1))
+    idx, t10, _ = downsample_action(t, X)  # already at 10 Hz: every sample
+    assert idx.tolist() == list(range(30)) and np.array_equal(t10, t)
+    for rate in (25.0, 5.0):
+        with pytest.raises(ValueError, match=rf"^times_100hz: rate {rate:.3f} Hz is not an integer multiple of "
+                                             r"10\.0 Hz$"):
+            downsample_action(np.arange(30) / rate, X)
+    # Integer input (whole seconds, 1 Hz -> 0.5 Hz) comes back as floats.
+    idx, t_half, X_half = downsample_action(list(range(5)), [[0, 0, 0, 1, 0, 0, 0]] * 5, rate_hz=0.5)
+    assert idx.tolist() == [0, 2, 4] and t_half.dtype == np.float64 and X_half.dtype == np.float64
+
+
+def test_object_frame_poses_normalise_and_start_with_positive_w():
+    X_WO = np.r_[0.5, 0.1, 0.0, 1.0, 0.0, 0.0, 0.0]
+    c, s = np.cos(0.3), np.sin(0.3)
+    q = np.array([c, -s, 0.0, 0.0])  # about -x; its first sample is given as -q (the same rotation)
+    X_WE = np.array([np.r_[0.6, 0.1, 0.2, -q], np.r_[0.7, 0.1, 0.2, 3.0 * q]])  # second not unit
+    ours = object_frame_poses(np.r_[X_WO[:3], 2.0 * X_WO[3:]], X_WE)  # a non-unit object quaternion too
+    np.testing.assert_allclose(ours[:, :3], [[0.1, 0.0, 0.2], [0.2, 0.0, 0.2]], atol=1e-12)
+    np.testing.assert_allclose(ours[:, 3:], [q, q], atol=1e-12)
+    np.testing.assert_allclose(object_frame_poses(X_WO, X_WE[1:])[:, 3:], [q], atol=1e-12)  # w > 0 is kept
+
+
+def test_load_errors_of_the_metadata_and_scalars(tmp_path):
+    def write(name, **changes):
+        arrays = make_demo(perception=False).to_arrays()
+        for k, v in changes.items():
+            if v is None:
+                arrays.pop(k)
+            else:
+                arrays[k] = v
+        return _write_arrays(tmp_path / name, arrays)
+
+    cases = [
+        (write("a.npz", metadata=np.array(["{}", "{}"])),
+         r"field 'metadata' has shape \(2,\) dtype <U2; expected a JSON string$"),
+        (write("b.npz", metadata=np.array(5)), r"field 'metadata' has shape \(\) dtype int64; expected a JSON string$"),
+        (write("c.npz", metadata=np.array("{not json")), r"field 'metadata' is not valid JSON \("),
+        (write("d.npz", metadata=np.array("[1]")),
+         r"field 'metadata' names schema None; expected 'drake-skill-demonstration'$"),
+        (write("e.npz", metadata=np.array('{"schema": "other"}')),
+         r"field 'metadata' names schema 'other'; expected 'drake-skill-demonstration'$"),
+        (write("f.npz", skill=np.array(3)),
+         r"field 'skill' has shape \(\) dtype int64; expected a scalar of kind 'U'$"),
+        (write("g.npz", final_object_state=np.array(1)),
+         r"field 'final_object_state' has shape \(\) dtype int64; expected a scalar of kind 'f'$"),
+        (write("h.npz", seed=np.array(1.0)), r"field 'seed' has shape \(\) dtype float64; expected a scalar of kind"),
+        (write("i.npz", success=np.array(1.0)), r"field 'success' has shape \(\) dtype float64; expected a scalar"),
+        (write("j.npz", X_OE=None), r"field 'X_OE' is missing$"),
+    ]
+    for path, message in cases:
+        with pytest.raises(DemonstrationError, match=rf"^{re.escape(str(path))}: {message}"):
+            load_demonstration(path)
+    np.savez(tmp_path / "empty.npz")
+    with pytest.raises(DemonstrationError, match=r"field 'metadata' is missing; not a drake-skill demonstration file "
+                                                 r"\(fields: none\)$"):
+        load_demonstration(tmp_path / "empty.npz")
+    _write_arrays(tmp_path / "foreign.npz", {"y": np.zeros(1), "x": np.zeros(1)})
+    with pytest.raises(DemonstrationError, match=r"\(fields: x, y\)$"):
+        load_demonstration(tmp_path / "foreign.npz")
+
+
+def test_metadata_without_has_perception_means_no_camera(tmp_path):
+    arrays = make_demo(perception=False).to_arrays()
+    meta = json.loads(arrays["metadata"].item())
+    del meta["has_perception"]
+    arrays["metadata"] = np.array(json.dumps(meta))
+    path = _write_arrays(tmp_path / "demo_000.npz", arrays)
+    assert not load_demonstration(path).has_perception
