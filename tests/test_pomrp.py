@@ -327,3 +327,32 @@ def test_a_path_that_visits_the_terminal_state_and_moves_on_fails():
     back = means[np.array([0] * 10 + [1] * 10 + [2] * 10 + [1] * 10 + [2] * 5)]
     stays = means[np.array([0] * 10 + [1] * 10 + [2] * 20)]
     assert pomrp.verdict(back) and pomrp.verdict(stays)
+
+
+# ------------------------------------------------------------------ mutation testing (docs/mutation.md)
+def test_streaming_filter_matches_batch_on_frames_off_the_data(pomrp, held_out):
+    """Where the off-model weight w_t < 1, filter_update's reward is still filtered_rewards at t."""
+    G = held_out[1]
+    H = G + np.random.default_rng(1).standard_normal(G.shape) * np.linspace(0.0, 3.0, len(G))[:, None]
+    assert (pomrp.explained_weights(H) < 0.5).any()
+    lb, rewards = None, []
+    for t, g in enumerate(H):
+        lb, _, r = pomrp.filter_update(lb, g, first=(t == 0))
+        rewards.append(r)
+    np.testing.assert_allclose(rewards, pomrp.filtered_rewards(H), rtol=1e-9, atol=1e-300)
+    g = H[0].copy()
+    g[2] = np.nan
+    with pytest.raises(ValueError, match=r"^g: non-finite goal data \["):
+        pomrp.filter_update(None, g, first=True)
+
+
+def test_metadata_keys_and_a_non_default_verdict_round_trip(pomrp, held_out):
+    strict = Pomrp(pomrp.goal_model, pomrp.values, VerdictConfig(require_likelihood=True, loglik_margin=1.5),
+                   pomrp.info, pomrp.off_model_config, pomrp.frame_loglik_range, pomrp.data_covar,
+                   pomrp.references)
+    arrays, meta = strict.to_arrays()
+    assert set(meta) == {"hmm", "info", "verdict", "off_model"}
+    assert meta["hmm"] == pomrp.goal_model.to_arrays()[1]
+    back = Pomrp.from_arrays(arrays, json.loads(json.dumps(meta)))
+    assert back.verdict_config == VerdictConfig(True, 1.5)
+    assert back.verdict_details(held_out[0]) == strict.verdict_details(held_out[0])
