@@ -309,3 +309,17 @@ def test_npz_errors_name_the_array_and_the_file(tmp_path):
     assert not (tmp_path / "x.npz").exists()
     with pytest.raises(FileNotFoundError, match=r"missing\.npz: no such file"):
         fileio.load_npz(tmp_path / "missing.npz")
+
+
+def test_write_figure_png_renders_with_the_given_options(tmp_path):
+    import struct
+
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(2.0, 1.0))
+    fig.add_subplot().plot([0, 1], [1, 0])
+    path = fileio.write_figure_png(fig, tmp_path / "plot.png", dpi=50)
+    assert path == tmp_path / "plot.png"
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert struct.unpack(">II", data[16:24]) == (100, 50)  # IHDR width, height: 2 x 1 in at 50 dpi
