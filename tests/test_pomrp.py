@@ -356,3 +356,23 @@ def test_metadata_keys_and_a_non_default_verdict_round_trip(pomrp, held_out):
     back = Pomrp.from_arrays(arrays, json.loads(json.dumps(meta)))
     assert back.verdict_config == VerdictConfig(True, 1.5)
     assert back.verdict_details(held_out[0]) == strict.verdict_details(held_out[0])
+
+
+def test_from_arrays_metadata_defaults_and_errors(pomrp, held_out):
+    arrays, meta = pomrp.to_arrays()
+    # Metadata written before the verdict settings and the off-model guard: defaults, guard off.
+    old = Pomrp.from_arrays(arrays, {"hmm": meta["hmm"], "info": meta["info"]})
+    assert old.verdict_config == VerdictConfig() and not old.off_model_config.enabled
+    np.testing.assert_array_equal(old.explained_weights(held_out[0]), 1.0)
+    bare = Pomrp.from_arrays(arrays, {})  # no metadata at all: the goal model's defaults (full covariances)
+    assert bare.episode_return(held_out[0]) == old.episode_return(held_out[0])
+    # The goal model's metadata is read and errors carry the prefix.
+    with pytest.raises(ValueError, match=r"^goal-model metadata 'n_states' = 5 disagrees with p/hmm_means of shape "
+                                         r"\(4, 8\)$"):
+        Pomrp.from_arrays(arrays, dict(meta, hmm=dict(meta["hmm"], n_states=5)), prefix="p/")
+    with pytest.raises(ValueError, match=r"^missing array 'values'$"):
+        Pomrp.from_arrays({k: v for k, v in arrays.items() if k != "values"}, meta)
+    with pytest.raises(ValueError, match=r"^p/values: expected 4 finite state values, got shape \(3,\)$"):
+        Pomrp.from_arrays(dict(arrays, values=np.zeros(3)), meta, prefix="p/")
+    with pytest.raises(ValueError, match=r"^POMRP metadata: .*unexpected keyword argument 'bogus'"):
+        Pomrp.from_arrays(arrays, dict(meta, verdict={"bogus": 1}))
