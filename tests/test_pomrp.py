@@ -376,3 +376,25 @@ def test_from_arrays_metadata_defaults_and_errors(pomrp, held_out):
         Pomrp.from_arrays(dict(arrays, values=np.zeros(3)), meta, prefix="p/")
     with pytest.raises(ValueError, match=r"^POMRP metadata: .*unexpected keyword argument 'bogus'"):
         Pomrp.from_arrays(arrays, dict(meta, verdict={"bogus": 1}))
+
+
+def test_fit_uses_the_configured_mrp_settings():
+    """A small fit (one candidate model) with every MRP setting changed: the values are those settings'."""
+    from drake_skill.reward.goal_model import GoalModelConfig
+    from drake_skill.reward.mrp import MrpConfig, monte_carlo_values
+
+    X, lengths = sample_demonstrations(TRUE, [30, 34], seed=3)
+    mc = MrpConfig(n_sequences=7, gamma=0.7, terminal_scale=3.0, length=20, random_state=5)
+    config = PomrpConfig(goal_model=GoalModelConfig(n_states_min=4, n_states_max=4, covariance_types=["diag"],
+                                                    n_restarts=1, n_iter=20), mrp=mc)
+    fitted = fit_pomrp(X, lengths, config)
+    hmm = fitted.goal_model
+    assert hmm.lengths_.tolist() == [30, 34] and fitted.info["mrp_length"] == 20
+    expected = monte_carlo_values(hmm.startprob_, hmm.transmat_, hmm.terminal_states_, 20, n_sequences=7,
+                                  gamma=0.7, terminal_scale=3.0, random_state=5)
+    np.testing.assert_array_equal(fitted.values, expected)
+    for other in (MrpConfig(n_sequences=7, gamma=0.7, terminal_scale=3.0, length=20, random_state=6),
+                  MrpConfig(n_sequences=8, gamma=0.7, terminal_scale=3.0, length=20, random_state=5)):
+        assert not np.array_equal(fitted.values, monte_carlo_values(
+            hmm.startprob_, hmm.transmat_, hmm.terminal_states_, other.length, n_sequences=other.n_sequences,
+            gamma=other.gamma, terminal_scale=other.terminal_scale, random_state=other.random_state))
