@@ -379,6 +379,8 @@ def test_from_arrays_metadata_defaults_and_errors(pomrp, held_out):
 
 
 def test_fit_uses_the_configured_mrp_settings():
+    import dataclasses
+
     """A small fit (one candidate model) with every MRP setting changed: the values are those settings'."""
     from drake_skill.reward.goal_model import GoalModelConfig
     from drake_skill.reward.mrp import MrpConfig, monte_carlo_values
@@ -393,8 +395,35 @@ def test_fit_uses_the_configured_mrp_settings():
     expected = monte_carlo_values(hmm.startprob_, hmm.transmat_, hmm.terminal_states_, 20, n_sequences=7,
                                   gamma=0.7, terminal_scale=3.0, random_state=5)
     np.testing.assert_array_equal(fitted.values, expected)
+    assert fitted.info == {"mrp": dataclasses.asdict(mc), "mrp_length": 20}
+    # The off-model guard's frame covariance: the biased sample covariance plus covar_reg times its mean variance.
+    S = np.cov(X.T, bias=True)
+    assert np.trace(S) / len(S) < 1.0
+    np.testing.assert_allclose(fitted.data_covar, S + config.off_model.covar_reg * np.trace(S) / len(S) * np.eye(8),
+                               rtol=1e-12)
     for other in (MrpConfig(n_sequences=7, gamma=0.7, terminal_scale=3.0, length=20, random_state=6),
                   MrpConfig(n_sequences=8, gamma=0.7, terminal_scale=3.0, length=20, random_state=5)):
         assert not np.array_equal(fitted.values, monte_carlo_values(
             hmm.startprob_, hmm.transmat_, hmm.terminal_states_, other.length, n_sequences=other.n_sequences,
             gamma=other.gamma, terminal_scale=other.terminal_scale, random_state=other.random_state))
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("covar_reg", 0.0, r"off_model\.covar_reg: expected a finite value > 0, got 0\.0$"),
+    ("covar_reg", np.inf, r"off_model\.covar_reg: expected a finite value > 0, got inf$"),
+    ("quantile", 1.0, r"off_model\.quantile: expected a value in \[0, 1\), got 1\.0$"),
+    ("quantile", 1.5, r"off_model\.quantile: expected a value in \[0, 1\), got 1\.5$"),
+    ("quantile", 0.0, None),
+])
+def test_off_model_settings_are_checked_at_fit(field, value, message):
+    from drake_skill.reward.goal_model import GoalModelConfig
+
+    X, lengths = sample_demonstrations(TRUE, [30, 34], seed=3)
+    config = PomrpConfig(goal_model=GoalModelConfig(n_states_min=4, n_states_max=4, covariance_types=["diag"],
+                                                    n_restarts=1, n_iter=20),
+                         off_model=OffModelConfig(**{field: value}))
+    if message is None:
+        assert fit_pomrp(X, lengths, config).off_model_config.quantile == 0.0
+    else:
+        with pytest.raises(ValueError, match=rf"^{message}"):
+            fit_pomrp(X, lengths, config)
