@@ -397,3 +397,270 @@ def test_interrupted_append_leaves_old_or_new(tmp_path, monkeypatch):
         if not state["fired"]:
             break
     assert not state["fired"] and outcomes[-1] and not outcomes[0] and len(outcomes) >= 4
+
+
+# ------------------------------------------------------------- mutation testing (docs/mutation.md)
+def test_fields_of_other_dtypes_are_named():
+    demo = make_demo(perception=False)
+    demo.q_100hz = np.zeros((121, 7), dtype=np.int64)
+    with pytest.raises(DemonstrationError, match=r"^demonstration: field 'q_100hz' has dtype int64; "
+                                                 r"expected a floating-point array$"):
+        demo.validate()
+    demo = make_demo(perception=False)
+    demo.gripper_100hz = [0.0] * 121
+    with pytest.raises(DemonstrationError, match=r"^here: field 'gripper_100hz' has dtype list; expected a floating"):
+        demo.validate("here")
+    demo = make_demo(perception=False)
+    demo.times = np.arange(13)
+    with pytest.raises(DemonstrationError, match=r"^demonstration: field 'times' has dtype int64; expected a floating"):
+        demo.validate()
+
+
+def test_10hz_times_match_raw_instants_up_to_rounding():
+    """times need not be bit-identical to times_100hz (another computation of the same instants)."""
+    demo = make_demo(perception=False)
+    for k, eps in [(0, 1e-12), (5, 1e-12), (6, -1e-12), (12, 1e-12), (12, -1e-12)]:
+        d = make_demo(perception=False)
+        d.times[k] += eps
+        d.validate()
+    demo.times[4] += 0.005  # half-way between two raw instants
+    with pytest.raises(DemonstrationError, match=r"^demonstration: field 'times' sample 4 \(0\.405000 s\) is not one "
+                                                 r"of the times_100hz instants; expected the 10 Hz times to be a "
+                                                 r"subset of the raw ones \(downsample_action\)$"):
+        demo.validate()
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("seed", np.array([1, 2]), r"has shape \(2,\) dtype int64; expected a scalar of kind 'iu'"),
+    ("seed", np.array(1.5), r"has shape \(\) dtype float64; expected a scalar of kind 'iu'"),
+    ("success", np.array(1), r"has shape \(\) dtype int64; expected a scalar of kind 'b'"),
+])
+def test_scalar_fields_are_checked_on_load(tmp_path, field, value, message):
+    arrays = make_demo(perception=False).to_arrays()
+    arrays[field] = value
+    path = _write_arrays(tmp_path / "demo_000.npz", arrays)
+    with pytest.raises(DemonstrationError, match=rf"^{re.escape(str(path))}: field '{field}' {message}$"):
+        load_demonstration(path)
+
+
+def test_file_and_folder_errors_say_what_to_do(tmp_path):
+    path = save_demonstration(make_demo(perception=False), tmp_path / "demo_000.npz")
+    with pytest.raises(FileExistsError, match=r"demo_000.npz exists; refusing to overwrite a recorded demonstration "
+                                              r"\(pass force=True / --force to replace it\)$"):
+        save_demonstration(make_demo(perception=False), path)
+    with pytest.raises(FileNotFoundError, match=r"^.*missing: no such directory$"):
+        load_demonstrations(tmp_path / "missing")
+    from drake_skill.demos.format import append_demonstration
+
+    with pytest.raises(NotADirectoryError, match=r"demo_000.npz: exists and is not a folder; choose a folder"):
+        append_demonstration(make_demo(perception=False), path)
+
+
+def test_manifest_contents_and_mismatch_messages(tmp_path):
+    from drake_skill.demos.format import MANIFEST, append_demonstration, save_demonstrations
+    from drake_skill.fileio import file_sha256
+
+    out = tmp_path / "open"
+    save_demonstrations([make_demo(0, perception=False), make_demo(1, perception=False)], out)
+    manifest = json.loads((out / MANIFEST).read_text())
+    assert manifest == {"schema": "drake-skill-demonstration-set",
+                        "files": {p.name: file_sha256(p) for p in sorted(out.glob("demo_*.npz"))}}
+    seen = []
+    append_demonstration(make_demo(2, perception=False), out,
+                         extra=lambda tmp: seen.extend(sorted(p.name for p in tmp.iterdir())))
+    assert seen == ["demo_000.npz", "demo_001.npz", "demo_002.npz"]  # extra sees the whole new set
+    manifest = json.loads((out / MANIFEST).read_text())
+    assert manifest["schema"] == "drake-skill-demonstration-set" and len(manifest["files"]) == 3
+    save_demonstration(make_demo(7, perception=False), out / "demo_001.npz", force=True)
+    with pytest.raises(DemonstrationError, match=r"demo_001\.npz: contents differ from the checksum in .*demos\.json; "
+                                                 r"the folder mixes recordings\. Record the set again "
+                                                 r"\(demos record --force\)$"):
+        load_demonstrations(out)
+    (out / "demo_001.npz").unlink()
+    with pytest.raises(DemonstrationError, match=r"do not match demos\.json \(missing \['demo_001\.npz'\], not listed "
+                                                 r"\[\]\); the folder mixes recordings\. Record the set again "
+                                                 r"\(demos record --force\)$"):
+        load_demonstrations(out)
+    (out / MANIFEST).write_text("not json")
+    with pytest.raises(DemonstrationError, match=r"demos\.json: not a drake-skill demonstration list \(.*\); delete it "
+                                                 r"if the folder was assembled by hand$"):
+        load_demonstrations(out)
+
+
+def test_set_errors_name_the_files(tmp_path):
+    from drake_skill.demos.format import append_demonstration, save_demonstrations
+
+    out = tmp_path / "open"
+    for i in range(4):
+        save_demonstration(make_demo(i, perception=False), demo_path(out, i))
+    with pytest.raises(FileExistsError, match=r"holds 4 demonstration file\(s\) \(demo_000\.npz, demo_001\.npz, "
+                                              r"demo_002\.npz, \.\.\.\); pass --force to replace them or choose "
+                                              r"another --out$"):
+        save_demonstrations([make_demo(9, perception=False)], out)
+    demo_path(out, 3).unlink()
+    with pytest.raises(FileExistsError, match=r"\(demo_000\.npz, demo_001\.npz, demo_002\.npz\); pass --force"):
+        save_demonstrations([make_demo(9, perception=False)], out)
+    bad = make_demo(9, perception=False)
+    bad.X_OE[2, 0] = np.nan
+    with pytest.raises(DemonstrationError, match=r"open/demo_001\.npz: field 'X_OE' contains NaN"):
+        save_demonstrations([make_demo(8, perception=False), bad], out, force=True)
+    with pytest.raises(DemonstrationError, match=r"open/demo_003\.npz: field 'X_OE' contains NaN"):
+        append_demonstration(bad, out)
+
+
+def test_a_stale_plot_is_not_carried_into_a_new_set(tmp_path):
+    from drake_skill.demos.format import save_demonstrations
+
+    out = tmp_path / "open"
+    save_demonstrations([make_demo(0, perception=False)], out, extra=lambda tmp: (tmp / "demos.png").write_bytes(b"x"))
+    assert (out / "demos.png").read_bytes() == b"x"
+    save_demonstrations([make_demo(1, perception=False)], out, force=True)
+    assert sorted(p.name for p in out.iterdir()) == ["demo_000.npz", "demos.json"]
+
+
+def _set(**fields):
+    return lambda d: [setattr(d, k, v) for k, v in fields.items()]
+
+
+def _set_item(field, index, value):
+    return lambda d: getattr(d, field).__setitem__(index, value)
+
+
+@pytest.mark.parametrize("change, message", [
+    (_set(skill=""), r"field 'skill' is ''; expected a skill's name \(letters, digits, '_', '-'\)"),
+    (_set(skill=3), r"field 'skill' is 3; expected a skill's name"),
+    (_set(seed=True), r"field 'seed' is True; expected an integer"),
+    (_set(seed=1.0), r"field 'seed' is 1\.0; expected an integer"),
+    (_set(success=1), r"field 'success' is 1; expected a bool"),
+    (_set(final_object_state=float("nan")), r"field 'final_object_state' is nan; expected a finite number"),
+    (lambda d: setattr(d, "times_100hz", d.times_100hz[:, None]),
+     r"field 'times_100hz' has shape \(121, 1\); expected \(T,\)"),
+    (_set_item("times", 4, 0.3), r"field 'times' is not strictly increasing \(t\[3\] = 0\.3 s, t\[4\] = 0\.3 s\)"),
+    (lambda d: setattr(d, "q_100hz", d.q_100hz[:, :6]), r"field 'q_100hz' has shape \(121, 6\); expected \(121, 7\)"),
+    (_set(gripper_100hz=np.zeros(120)), r"field 'gripper_100hz' has shape \(120,\); expected \(121,\)"),
+    (_set(gripper_100hz=np.zeros(121, dtype=int)), r"field 'gripper_100hz' has dtype int64; expected a floating"),
+    (_set(object_state_100hz=np.zeros(120)), r"field 'object_state_100hz' has shape \(120,\); expected \(121,\)"),
+    (_set(object_state_100hz=np.zeros(121, dtype=int)), r"field 'object_state_100hz' has dtype int64; expected a"),
+    (_set_item("times", 0, -0.01), r"field 'times' spans -0\.010\.\.1\.200 s, outside times_100hz 0\.000\.\.1\.200 s"),
+    (_set_item("times", 12, 1.21), r"field 'times' spans 0\.000\.\.1\.210 s, outside times_100hz 0\.000\.\.1\.200 s"),
+    (_set_item("X_WO_true", 3, 2.0), r"field 'X_WO_true' has a quaternion of norm 2\.\d+ at sample 0; "
+                                     r"expected unit norm within 0\.001"),
+    (_set(perception_valid=None), r"field 'perception_valid' is missing while X_WO_start, object_points is present; "
+                                  r"perception fields come together"),
+    (_set(perception_valid=None, object_points=None), r"field 'object_points' is missing while X_WO_start is present"),
+    (_set_item("X_WO_start", 3, 2.0), r"field 'X_WO_start' has a quaternion of norm"),
+    (lambda d: setattr(d, "object_points", d.object_points[:, :, :2].copy()),
+     r"field 'object_points' has shape \(13, 2048, 2\) dtype float32; expected \(13, 2048, 3\) float32 \(2048 "
+     r"points per frame, docs/method\.md section 3\)"),
+    (lambda d: setattr(d, "object_points", d.object_points[:12]), r"field 'object_points' has shape \(12, 2048, 3\)"),
+    (_set(object_points=[[0.0]]), r"field 'object_points' has shape None dtype None; expected \(13, 2048, 3\)"),
+    (_set_item("object_points", (2, 5, 1), np.inf), r"field 'object_points' contains NaN or inf$"),
+    (_set(perception_valid=np.ones(13)), r"field 'perception_valid' has shape \(13,\) dtype float64; "
+                                         r"expected \(13,\) bool"),
+    (_set(perception_valid=np.ones(12, dtype=bool)), r"field 'perception_valid' has shape \(12,\) dtype bool"),
+    (_set(perception_valid=[True] * 13), r"field 'perception_valid' has shape None dtype None; expected \(13,\) bool"),
+])
+def test_each_invalid_field_is_named(change, message):
+    demo = make_demo()
+    change(demo)
+    with pytest.raises(DemonstrationError, match=rf"^somewhere: {message}"):
+        demo.validate("somewhere")
+
+
+def test_the_fewest_samples_are_valid():
+    demo = make_demo(perception=False, n=91)  # 91 raw samples, 10 at 10 Hz
+    assert demo.validate().n_samples == 10
+
+
+def test_clouds_flat_along_one_axis_are_valid_and_the_degenerate_frame_is_named():
+    demo = make_demo()
+    demo.object_points[3, :, 2] = 0.0  # a flat cloud (a lid seen from above): two wide axes are enough
+    demo.perception_valid[3] = True
+    demo.validate()
+    demo.object_points[6, :, :2] = 0.3
+    demo.object_points[6, :, 2] = np.linspace(0.0, 0.123456, 2048)
+    demo.perception_valid[6] = True
+    with pytest.raises(DemonstrationError, match=r"^demonstration: field 'object_points' frame 6 is marked valid "
+                                                 r"but its cloud is degenerate \(bounding box \[0\.0, 0\.0, "
+                                                 r"0\.123499\d*\] m; expected at least 0\.005 m along two axes\)"):
+        demo.validate()
+
+
+def test_metadata_must_be_json():
+    demo = make_demo(perception=False)
+    demo.metadata = {"when": object()}
+    with pytest.raises(DemonstrationError, match=r"^demonstration: field 'metadata' is not JSON-serialisable \("):
+        demo.validate()
+
+
+def test_downsample_action_rates():
+    t = np.arange(30) / 10.0
+    X = np.tile([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], (30, 1))
+    idx, t10, _ = downsample_action(t, X)  # already at 10 Hz: every sample
+    assert idx.tolist() == list(range(30)) and np.array_equal(t10, t)
+    for rate in (25.0, 5.0):
+        with pytest.raises(ValueError, match=rf"^times_100hz: rate {rate:.3f} Hz is not an integer multiple of "
+                                             r"10\.0 Hz$"):
+            downsample_action(np.arange(30) / rate, X)
+    # Integer input (whole seconds, 1 Hz -> 0.5 Hz) comes back as floats.
+    idx, t_half, X_half = downsample_action(list(range(5)), [[0, 0, 0, 1, 0, 0, 0]] * 5, rate_hz=0.5)
+    assert idx.tolist() == [0, 2, 4] and t_half.dtype == np.float64 and X_half.dtype == np.float64
+
+
+def test_object_frame_poses_normalise_and_start_with_positive_w():
+    X_WO = np.r_[0.5, 0.1, 0.0, 1.0, 0.0, 0.0, 0.0]
+    c, s = np.cos(0.3), np.sin(0.3)
+    q = np.array([c, -s, 0.0, 0.0])  # about -x; its first sample is given as -q (the same rotation)
+    X_WE = np.array([np.r_[0.6, 0.1, 0.2, -q], np.r_[0.7, 0.1, 0.2, 3.0 * q]])  # second not unit
+    ours = object_frame_poses(np.r_[X_WO[:3], 2.0 * X_WO[3:]], X_WE)  # a non-unit object quaternion too
+    np.testing.assert_allclose(ours[:, :3], [[0.1, 0.0, 0.2], [0.2, 0.0, 0.2]], atol=1e-12)
+    np.testing.assert_allclose(ours[:, 3:], [q, q], atol=1e-12)
+    np.testing.assert_allclose(object_frame_poses(X_WO, X_WE[1:])[:, 3:], [q], atol=1e-12)  # w > 0 is kept
+
+
+def test_load_errors_of_the_metadata_and_scalars(tmp_path):
+    def write(name, **changes):
+        arrays = make_demo(perception=False).to_arrays()
+        for k, v in changes.items():
+            if v is None:
+                arrays.pop(k)
+            else:
+                arrays[k] = v
+        return _write_arrays(tmp_path / name, arrays)
+
+    cases = [
+        (write("a.npz", metadata=np.array(["{}", "{}"])),
+         r"field 'metadata' has shape \(2,\) dtype <U2; expected a JSON string$"),
+        (write("b.npz", metadata=np.array(5)), r"field 'metadata' has shape \(\) dtype int64; expected a JSON string$"),
+        (write("c.npz", metadata=np.array("{not json")), r"field 'metadata' is not valid JSON \("),
+        (write("d.npz", metadata=np.array("[1]")),
+         r"field 'metadata' names schema None; expected 'drake-skill-demonstration'$"),
+        (write("e.npz", metadata=np.array('{"schema": "other"}')),
+         r"field 'metadata' names schema 'other'; expected 'drake-skill-demonstration'$"),
+        (write("f.npz", skill=np.array(3)),
+         r"field 'skill' has shape \(\) dtype int64; expected a scalar of kind 'U'$"),
+        (write("g.npz", final_object_state=np.array(1)),
+         r"field 'final_object_state' has shape \(\) dtype int64; expected a scalar of kind 'f'$"),
+        (write("h.npz", seed=np.array(1.0)), r"field 'seed' has shape \(\) dtype float64; expected a scalar of kind"),
+        (write("i.npz", success=np.array(1.0)), r"field 'success' has shape \(\) dtype float64; expected a scalar"),
+        (write("j.npz", X_OE=None), r"field 'X_OE' is missing$"),
+    ]
+    for path, message in cases:
+        with pytest.raises(DemonstrationError, match=rf"^{re.escape(str(path))}: {message}"):
+            load_demonstration(path)
+    np.savez(tmp_path / "empty.npz")
+    with pytest.raises(DemonstrationError, match=r"field 'metadata' is missing; not a drake-skill demonstration file "
+                                                 r"\(fields: none\)$"):
+        load_demonstration(tmp_path / "empty.npz")
+    _write_arrays(tmp_path / "foreign.npz", {"y": np.zeros(1), "x": np.zeros(1)})
+    with pytest.raises(DemonstrationError, match=r"\(fields: x, y\)$"):
+        load_demonstration(tmp_path / "foreign.npz")
+
+
+def test_metadata_without_has_perception_means_no_camera(tmp_path):
+    arrays = make_demo(perception=False).to_arrays()
+    meta = json.loads(arrays["metadata"].item())
+    del meta["has_perception"]
+    arrays["metadata"] = np.array(json.dumps(meta))
+    path = _write_arrays(tmp_path / "demo_000.npz", arrays)
+    assert not load_demonstration(path).has_perception

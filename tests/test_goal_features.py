@@ -55,7 +55,8 @@ def _numpy_pca(x, k):
 PCA_TOLERANCE = 1e-9
 
 
-@pytest.mark.parametrize("seed, t, rank", [(3, 60, 12), (4, 120, 30)])
+# (4, 600, 30): over 500 codes, where scikit-learn's default solver would be the randomized one.
+@pytest.mark.parametrize("seed, t, rank", [(3, 60, 12), (4, 120, 30), (4, 600, 30)])
 def test_same_goal_data_as_the_hand_written_pca(seed, t, rank):
     x = _codes(seed=seed, t=t, rank=rank)
     gf = GoalFeatures(8).fit(x)
@@ -166,3 +167,96 @@ def test_other_errors():
     bad = dict(arrays, components=np.zeros((8,)))
     with pytest.raises(ValueError, match=r"arrays\['components'\]"):
         GoalFeatures.from_arrays(bad)
+
+
+# ------------------------------------------------------------------ mutation testing (docs/mutation.md)
+
+
+def test_constructor_bounds_are_inclusive():
+    assert GoalFeatures(1).n_components == 1  # one component is valid
+    assert GoalFeatures(3, 3).n_features == 3  # as many components as features
+    for args in [(8, 7), (2, 4.5)]:
+        with pytest.raises(ValueError, match=r"^n_features: expected an integer >= n_components="):
+            GoalFeatures(*args)
+
+
+def test_integer_codes_are_fitted_and_non_numeric_codes_refused():
+    x = np.round(_codes(seed=6, d=16) * 10).astype(np.int64)
+    a = GoalFeatures(3, 16).fit(x)
+    b = GoalFeatures(3, 16).fit(x.astype(float))
+    np.testing.assert_array_equal(a.components_, b.components_)
+    with pytest.raises(ValueError, match=r"^codes: expected a numeric array of shape \(T, 16\), got dtype <U1"):
+        GoalFeatures(3, 16).fit(np.full((20, 16), "a"))
+
+
+def test_error_messages_start_with_the_argument():
+    with pytest.raises(ValueError, match=r"^codes: expected at least one demonstration, got an empty list$"):
+        GoalFeatures().fit([])
+    with pytest.raises(ValueError, match=r"^lengths: sum 10 does not match the 60 codes$"):
+        GoalFeatures().fit(_codes(), lengths=[5, 5])
+    with pytest.raises(ValueError, match=r"^GoalFeatures: not fitted; call fit\(codes\) or from_arrays"):
+        GoalFeatures().inverse_transform(np.zeros(8))
+
+
+def test_constant_codes_explain_no_variance():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # scikit-learn's 0 / 0 for the ratios
+        gf = GoalFeatures(2, 16).fit(np.ones((20, 16)))
+    np.testing.assert_array_equal(gf.explained_variance_ratio_, [0.0, 0.0])
+    assert gf.total_explained_variance_ratio == 0.0
+
+
+def test_fit_transform_equals_fit_then_transform():
+    x = _codes(seed=7, t=40, d=16)
+    g = GoalFeatures(3, 16).fit(x).transform(x)
+    np.testing.assert_allclose(GoalFeatures(3, 16).fit_transform(x), g, atol=1e-12)
+    np.testing.assert_allclose(GoalFeatures(3, 16).fit_transform([x[:15], x[15:]], lengths=[15, 25]), g,
+                               atol=1e-12)
+    with pytest.raises(ValueError, match=r"^lengths: sum 10 does not match the 40 codes$"):
+        GoalFeatures(3, 16).fit_transform(x, lengths=[10])
+
+
+def test_inverse_transform_shapes():
+    x = _codes(seed=8, t=40, d=16)
+    gf = GoalFeatures(3, 16).fit(x)
+    g = gf.transform(x)
+    np.testing.assert_allclose(gf.inverse_transform(g[5]), gf.inverse_transform(g)[5], atol=1e-12)
+    assert gf.inverse_transform([1, 0, 0]).shape == (16,)
+    for bad in [np.zeros((4, 5)), np.zeros(5), np.zeros((2, 4, 3))]:
+        with pytest.raises(ValueError, match=r"^goal: expected shape \(T, 3\) or \(3,\), got"):
+            gf.inverse_transform(bad)
+
+
+def test_from_arrays_other_sizes_and_float64_attributes():
+    x = _codes(seed=9, t=40, d=16)
+    gf = GoalFeatures(1, 16).fit(x)  # k = 1, D = 16 (not the PCAE's 128)
+    arrays = {k: (v.astype(np.float32) if v.dtype == np.float64 else v) for k, v in gf.to_arrays().items()}
+    back = GoalFeatures.from_arrays(arrays)
+    assert (back.n_components, back.n_features) == (1, 16)
+    for name in ("mean_", "components_", "explained_variance_", "explained_variance_ratio_"):
+        assert getattr(back, name).dtype == np.float64, name
+        np.testing.assert_allclose(getattr(back, name), getattr(gf, name), rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(back.transform(x), gf.transform(x), rtol=1e-5, atol=1e-5)
+    square = GoalFeatures.from_arrays(dict(gf.to_arrays(), components=np.eye(16)[:16],
+                                           explained_variance=np.ones(16), explained_variance_ratio=np.ones(16)))
+    assert square.components_.shape == (16, 16)  # D == k is valid
+
+
+@pytest.mark.parametrize("components", [np.zeros((3, 2)), np.zeros((0, 5))])
+def test_from_arrays_refuses_more_components_than_features_or_none(components):
+    arrays = {"mean": np.zeros(components.shape[1]), "components": components,
+              "explained_variance": np.zeros(components.shape[0]),
+              "explained_variance_ratio": np.zeros(components.shape[0]), "n_samples": np.array(10)}
+    with pytest.raises(ValueError, match=r"^arrays\['components'\]: expected shape \(k, D\) with D >= k >= 1"):
+        GoalFeatures.from_arrays(arrays)
+
+
+def test_from_arrays_refuses_non_finite_values():
+    arrays = GoalFeatures(2, 16).fit(_codes(seed=10, t=30, d=16)).to_arrays()
+    for key in ("components", "mean", "explained_variance", "explained_variance_ratio"):
+        bad = {k: v.copy() for k, v in arrays.items()}
+        bad[key].flat[0] = np.nan
+        with pytest.raises(ValueError, match=rf"^arrays\['{key}'\]: contains NaN or infinite values$"):
+            GoalFeatures.from_arrays(bad)

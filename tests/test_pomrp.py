@@ -327,3 +327,103 @@ def test_a_path_that_visits_the_terminal_state_and_moves_on_fails():
     back = means[np.array([0] * 10 + [1] * 10 + [2] * 10 + [1] * 10 + [2] * 5)]
     stays = means[np.array([0] * 10 + [1] * 10 + [2] * 20)]
     assert pomrp.verdict(back) and pomrp.verdict(stays)
+
+
+# ------------------------------------------------------------------ mutation testing (docs/mutation.md)
+def test_streaming_filter_matches_batch_on_frames_off_the_data(pomrp, held_out):
+    """Where the off-model weight w_t < 1, filter_update's reward is still filtered_rewards at t."""
+    G = held_out[1]
+    H = G + np.random.default_rng(1).standard_normal(G.shape) * np.linspace(0.0, 3.0, len(G))[:, None]
+    assert (pomrp.explained_weights(H) < 0.5).any()
+    lb, rewards = None, []
+    for t, g in enumerate(H):
+        lb, _, r = pomrp.filter_update(lb, g, first=(t == 0))
+        rewards.append(r)
+    np.testing.assert_allclose(rewards, pomrp.filtered_rewards(H), rtol=1e-9, atol=1e-300)
+    g = H[0].copy()
+    g[2] = np.nan
+    with pytest.raises(ValueError, match=r"^g: non-finite goal data \["):
+        pomrp.filter_update(None, g, first=True)
+
+
+def test_metadata_keys_and_a_non_default_verdict_round_trip(pomrp, held_out):
+    strict = Pomrp(pomrp.goal_model, pomrp.values, VerdictConfig(require_likelihood=True, loglik_margin=1.5),
+                   pomrp.info, pomrp.off_model_config, pomrp.frame_loglik_range, pomrp.data_covar,
+                   pomrp.references)
+    arrays, meta = strict.to_arrays()
+    assert set(meta) == {"hmm", "info", "verdict", "off_model"}
+    assert meta["hmm"] == pomrp.goal_model.to_arrays()[1]
+    back = Pomrp.from_arrays(arrays, json.loads(json.dumps(meta)))
+    assert back.verdict_config == VerdictConfig(True, 1.5)
+    assert back.verdict_details(held_out[0]) == strict.verdict_details(held_out[0])
+
+
+def test_from_arrays_metadata_defaults_and_errors(pomrp, held_out):
+    arrays, meta = pomrp.to_arrays()
+    # Metadata written before the verdict settings and the off-model guard: defaults, guard off.
+    old = Pomrp.from_arrays(arrays, {"hmm": meta["hmm"], "info": meta["info"]})
+    assert old.verdict_config == VerdictConfig() and not old.off_model_config.enabled
+    np.testing.assert_array_equal(old.explained_weights(held_out[0]), 1.0)
+    bare = Pomrp.from_arrays(arrays, {})  # no metadata at all: the goal model's defaults (full covariances)
+    assert bare.episode_return(held_out[0]) == old.episode_return(held_out[0])
+    # The goal model's metadata is read and errors carry the prefix.
+    with pytest.raises(ValueError, match=r"^goal-model metadata 'n_states' = 5 disagrees with p/hmm_means of shape "
+                                         r"\(4, 8\)$"):
+        Pomrp.from_arrays(arrays, dict(meta, hmm=dict(meta["hmm"], n_states=5)), prefix="p/")
+    with pytest.raises(ValueError, match=r"^missing array 'values'$"):
+        Pomrp.from_arrays({k: v for k, v in arrays.items() if k != "values"}, meta)
+    with pytest.raises(ValueError, match=r"^p/values: expected 4 finite state values, got shape \(3,\)$"):
+        Pomrp.from_arrays(dict(arrays, values=np.zeros(3)), meta, prefix="p/")
+    with pytest.raises(ValueError, match=r"^POMRP metadata: .*unexpected keyword argument 'bogus'"):
+        Pomrp.from_arrays(arrays, dict(meta, verdict={"bogus": 1}))
+
+
+def test_fit_uses_the_configured_mrp_settings():
+    import dataclasses
+
+    """A small fit (one candidate model) with every MRP setting changed: the values are those settings'."""
+    from drake_skill.reward.goal_model import GoalModelConfig
+    from drake_skill.reward.mrp import MrpConfig, monte_carlo_values
+
+    X, lengths = sample_demonstrations(TRUE, [30, 34], seed=3)
+    mc = MrpConfig(n_sequences=7, gamma=0.7, terminal_scale=3.0, length=20, random_state=5)
+    config = PomrpConfig(goal_model=GoalModelConfig(n_states_min=4, n_states_max=4, covariance_types=["diag"],
+                                                    n_restarts=1, n_iter=20), mrp=mc)
+    fitted = fit_pomrp(X, lengths, config)
+    hmm = fitted.goal_model
+    assert hmm.lengths_.tolist() == [30, 34] and fitted.info["mrp_length"] == 20
+    expected = monte_carlo_values(hmm.startprob_, hmm.transmat_, hmm.terminal_states_, 20, n_sequences=7,
+                                  gamma=0.7, terminal_scale=3.0, random_state=5)
+    np.testing.assert_array_equal(fitted.values, expected)
+    assert fitted.info == {"mrp": dataclasses.asdict(mc), "mrp_length": 20}
+    # The off-model guard's frame covariance: the biased sample covariance plus covar_reg times its mean variance.
+    S = np.cov(X.T, bias=True)
+    assert np.trace(S) / len(S) < 1.0
+    np.testing.assert_allclose(fitted.data_covar, S + config.off_model.covar_reg * np.trace(S) / len(S) * np.eye(8),
+                               rtol=1e-12)
+    for other in (MrpConfig(n_sequences=7, gamma=0.7, terminal_scale=3.0, length=20, random_state=6),
+                  MrpConfig(n_sequences=8, gamma=0.7, terminal_scale=3.0, length=20, random_state=5)):
+        assert not np.array_equal(fitted.values, monte_carlo_values(
+            hmm.startprob_, hmm.transmat_, hmm.terminal_states_, other.length, n_sequences=other.n_sequences,
+            gamma=other.gamma, terminal_scale=other.terminal_scale, random_state=other.random_state))
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("covar_reg", 0.0, r"off_model\.covar_reg: expected a finite value > 0, got 0\.0$"),
+    ("covar_reg", np.inf, r"off_model\.covar_reg: expected a finite value > 0, got inf$"),
+    ("quantile", 1.0, r"off_model\.quantile: expected a value in \[0, 1\), got 1\.0$"),
+    ("quantile", 1.5, r"off_model\.quantile: expected a value in \[0, 1\), got 1\.5$"),
+    ("quantile", 0.0, None),
+])
+def test_off_model_settings_are_checked_at_fit(field, value, message):
+    from drake_skill.reward.goal_model import GoalModelConfig
+
+    X, lengths = sample_demonstrations(TRUE, [30, 34], seed=3)
+    config = PomrpConfig(goal_model=GoalModelConfig(n_states_min=4, n_states_max=4, covariance_types=["diag"],
+                                                    n_restarts=1, n_iter=20),
+                         off_model=OffModelConfig(**{field: value}))
+    if message is None:
+        assert fit_pomrp(X, lengths, config).off_model_config.quantile == 0.0
+    else:
+        with pytest.raises(ValueError, match=rf"^{message}"):
+            fit_pomrp(X, lengths, config)
