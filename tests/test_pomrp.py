@@ -427,3 +427,24 @@ def test_off_model_settings_are_checked_at_fit(field, value, message):
     else:
         with pytest.raises(ValueError, match=rf"^{message}"):
             fit_pomrp(X, lengths, config)
+
+
+def test_off_model_range_is_each_demonstration_against_the_others(pomrp):
+    """frame_loglik_range: the log-density of every demonstration frame at its nearest frame of
+    the *other* demonstrations (leave one demonstration out), under the data covariance S:
+    (quantile, max) of l_t = -0.5 (d log 2 pi + log det S) - 0.5 min_j |y_t - r_j|^2_S."""
+    X, S = pomrp.references, pomrp.data_covar
+    lengths = [50, 60, 45]                     # the fixture's demonstrations, in order
+    Sinv = np.linalg.inv(S)
+    log_norm = -0.5 * (len(S) * np.log(2 * np.pi) + np.linalg.slogdet(S)[1])
+    ends = np.cumsum(lengths)
+    l_loo = []
+    for end, n in zip(ends, lengths):
+        own = np.zeros(len(X), bool)
+        own[end - n:end] = True
+        diff = X[own][:, None, :] - X[~own][None, :, :]
+        d2 = np.einsum("tjd,de,tje->tj", diff, Sinv, diff)
+        l_loo.append(log_norm - 0.5 * d2.min(axis=1))
+    l_loo = np.concatenate(l_loo)
+    q = pomrp.off_model_config.quantile
+    assert pomrp.frame_loglik_range == pytest.approx((np.quantile(l_loo, q), l_loo.max()), rel=1e-9, abs=1e-9)
