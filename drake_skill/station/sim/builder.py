@@ -2,7 +2,7 @@
 
 ``build_station(config)`` returns a :class:`Station`, a Diagram whose exported
 ports are the contract every other system of drake-skill talks to. The
-hardware station (``drake_skill.hardware``) exports the very same names, as
+hardware station (``drake_skill.station.hardware.station``) exports the same names, as
 ``MakeHardwareStation`` does in the ``manipulation`` course repository:
 
 inputs
