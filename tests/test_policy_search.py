@@ -599,3 +599,288 @@ def test_cma_es_needs_its_own_samples():
     search.tell(samples, np.ones(4))
     with pytest.raises(ValueError, match="popsize = 4"):
         search.ask(3)
+
+
+# ---------------------------------------------------------------------------
+# What the mutation audit of policy_search.py found untested (issue 33,
+# docs/mutation.md): defaults, boundaries, named errors, state round trips
+# ---------------------------------------------------------------------------
+
+from drake_skill.learning.policy_search import (  # noqa: E402
+    CMAES,
+    PI2ES,
+    PI2ESCov,
+    PoWER,
+    rollout_probabilities,
+)
+
+
+def _options(search):
+    state = search.state_dict()
+    return {k[len("option_"):]: v for k, v in state.items() if k.startswith("option_")}
+
+
+def test_default_options_are_the_documented_ones():
+    expected = {
+        "power": {"n_episodes": 30, "n_best": 6, "sigma0": 1.0, "decay_start": 7.5},
+        "pi2": {"n_episodes": 5, "sigma0": 1.0, "decay_start": 1.25, "weighting": "range", "h": 10.0},
+        "pi2-es": {"n_episodes": 5, "sigma0": 1.0, "decay_start": 1.25, "weighting": "thesis", "h": 10.0},
+        "pi2-cov": {"n_episodes": 5, "weighting": "range", "h": 10.0, "floor_fraction": 1e-2,
+                    "min_eigenvalue": 0.0},
+        "pi2-es-cov": {"n_episodes": 5, "weighting": "thesis", "h": 10.0, "floor_fraction": 1e-2,
+                       "min_eigenvalue": 0.0},
+        "cma-es": {"n_episodes": 5, "sigma0": 1.0, "popsize": 0},
+    }
+    for method in METHODS:
+        search = make_policy_search(method, MEAN0, SIGMA0)
+        assert _options(search) == expected[method], method
+        assert search.sigma == 1.0, method
+
+
+def test_options_reach_the_search():
+    given = {
+        "power": {"n_episodes": 7, "n_best": 1, "sigma0": 0.5, "decay_start": 0.0},
+        "pi2-es": {"n_episodes": 7, "sigma0": 0.5, "decay_start": 0.0, "weighting": "range", "h": 3.0},
+        "pi2-es-cov": {"n_episodes": 7, "weighting": "range", "h": 3.0, "floor_fraction": 1.0,
+                       "min_eigenvalue": 0.0},
+        "cma-es": {"n_episodes": 7, "sigma0": 0.5, "popsize": 2},
+    }
+    for method, options in given.items():
+        search = make_policy_search(method, MEAN0, SIGMA0, **options)
+        assert _options(search) == options, method
+        assert search.n_episodes == 7
+    cma_es = make_policy_search("cma-es", MEAN0, SIGMA0, popsize=4, seed=0)
+    assert cma_es.popsize == 4
+    with pytest.raises(ValueError, match="popsize = 4; got 3"):
+        cma_es.ask(3)
+    # Eq. 5.4 with U = 0 given: sigma_1 = 1 - 1 / 5 (U = E / 4 would keep 1).
+    search = make_policy_search("pi2-es", MEAN0, SIGMA0, decay_start=0.0, sigma0=0.5)
+    search.tell(SAMPLES, RETURNS)
+    assert search.sigma == pytest.approx(0.5 * 0.8)
+    assert sigma_schedule(1, 5, decay_start=0.0) == pytest.approx(0.8)
+
+
+def test_pi2_es_range_weighting_uses_its_h():
+    search = make_policy_search("pi2-es", MEAN0, SIGMA0, weighting="range", h=3.0)
+    search.tell(SAMPLES, RETURNS)
+    np.testing.assert_allclose(search.mean, weighted_mean(range_probabilities(RETURNS, h=3.0), SAMPLES),
+                               rtol=1e-12)
+
+
+def test_rollout_probabilities_defaults_and_range_by_hand():
+    # Defaults: thesis weighting of returns (Eq. 5.1), h = 10 for "range".
+    np.testing.assert_allclose(rollout_probabilities(RETURNS), thesis_probabilities(RETURNS), rtol=1e-12)
+    returns = np.array([5.1, 5.3, 5.2])           # span below one, minimum far from zero
+    np.testing.assert_allclose(rollout_probabilities(returns, weighting="range"),
+                               range_probabilities(returns), rtol=1e-12)
+    np.testing.assert_allclose(rollout_probabilities(returns, weighting="range", h=2.0),
+                               range_probabilities(returns, h=2.0), rtol=1e-12)
+
+
+def test_per_step_range_probabilities_by_hand():
+    """Eq. 3.27-3.29: range weighting of each step's reward-to-go, averaged with T - t."""
+    rewards = np.array([[4.0, 1.0, 0.0], [0.0, 0.5, 3.0], [1.0, 2.0, 1.0]])
+    togo = [[sum(row[t:]) for t in range(3)] for row in rewards]
+    per_step = [range_probabilities([togo[c][t] for c in range(3)], h=4.0) for t in range(3)]
+    expected = sum((3 - t) * per_step[t] for t in range(3)) / 6.0
+    np.testing.assert_allclose(rollout_probabilities(rewards, weighting="range", h=4.0, per_step=True),
+                               expected, rtol=1e-12)
+
+
+def test_per_step_methods_take_one_step_rollouts():
+    search = make_policy_search("pi2", MEAN0, SIGMA0)
+    search.tell(SAMPLES, RETURNS[:, None])        # T = 1 (PI^2's default: the range weighting)
+    np.testing.assert_allclose(search.mean, weighted_mean(range_probabilities(RETURNS), SAMPLES),
+                               rtol=1e-12)
+
+
+def test_power_uses_the_six_best_by_default():
+    search = make_policy_search("power", MEAN0, SIGMA0)
+    samples = np.stack([np.full((2, 2), float(k)) for k in range(7)])
+    returns = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.05])   # sum below one
+    search.tell(samples, returns)
+    best = returns[:6]
+    np.testing.assert_allclose(search.mean, MEAN0 + np.einsum("k,kbd->bd", best, samples[:6] - MEAN0)
+                               / best.sum(), rtol=1e-12)
+
+
+def test_power_ties_go_to_the_earlier_rollout():
+    search = make_policy_search("power", MEAN0, SIGMA0, n_best=6)
+    samples = np.stack([np.full((2, 2), float(k)) for k in range(40)])
+    search.tell(samples, np.ones(40))
+    np.testing.assert_allclose(search.mean, MEAN0 + (samples[:6] - MEAN0).mean(axis=0), rtol=1e-12)
+
+
+def test_floor_with_a_correlated_initial_covariance_by_hand():
+    """Sigma_b >= f Sigma_b^0: the floor is applied to L^-1 S L^-T and mapped back with L . L^T."""
+    f = 0.3
+    search = make_policy_search("pi2-es-cov", MEAN0, SIGMA0, floor_fraction=f)
+    search.tell(SAMPLES, np.array([0.0, 300.0, 0.0]))   # all weight on rollout 1: rank one
+    deviation = SAMPLES[1] - MEAN0
+    for b in range(2):
+        lower = np.linalg.cholesky(SIGMA0[b])
+        inv = np.linalg.inv(lower)
+        white = inv @ np.outer(deviation[b], deviation[b]) @ inv.T
+        values, vectors = np.linalg.eigh(white)
+        expected = lower @ (vectors @ np.diag(np.maximum(values, f)) @ vectors.T) @ lower.T
+        np.testing.assert_allclose(search.covariances[b], expected, rtol=1e-9, atol=1e-12)
+        assert np.linalg.eigvalsh(search.covariances[b] - f * SIGMA0[b]).min() > -1e-12
+
+
+def test_generator_seed_state_round_trips_through_json():
+    """A generator with array state (MT19937) continues bit for bit after a state round trip."""
+    for method in ("pi2-es", "cma-es"):
+        search = make_policy_search(method, MEAN0, SIGMA0,
+                                    seed=np.random.Generator(np.random.MT19937(3)))
+        restored = policy_search_from_state(search.state_dict())
+        np.testing.assert_array_equal(restored.ask(3), search.ask(3))
+
+
+def test_state_round_trips_before_the_first_tell():
+    for method in METHODS:
+        for options in ({}, {"popsize": 3}) if method == "cma-es" else ({},):
+            search = make_policy_search(method, MEAN0, SIGMA0, seed=5, **options)
+            restored = policy_search_from_state(search.state_dict())
+            assert restored.episode == 0 and _options(restored) == _options(search)
+            np.testing.assert_array_equal(restored.ask(3), search.ask(3))
+
+
+def test_state_of_numpy_scalars_restores():
+    search = make_policy_search("pi2-es", MEAN0, SIGMA0, seed=2)
+    search.tell(search.ask(3), RETURNS)
+    state = {k: (np.int64(v) if isinstance(v, int) else v) for k, v in search.state_dict().items()}
+    restored = policy_search_from_state(state)
+    assert restored.episode == 1
+    np.testing.assert_array_equal(restored.ask(3), search.ask(3))
+
+
+def test_cma_es_restored_twice_continues_the_run():
+    search = make_policy_search("cma-es", MEAN0, SIGMA0, seed=1)
+    search.tell(search.ask(4), np.arange(4.0))
+    twice = policy_search_from_state(policy_search_from_state(search.state_dict()).state_dict())
+    np.testing.assert_array_equal(twice.ask(4), search.ask(4))
+
+
+@pytest.mark.parametrize("key", ["episode", "mean", "rng_state"])
+def test_cma_es_refuses_a_state_its_history_does_not_reproduce(key):
+    search = make_policy_search("cma-es", MEAN0, SIGMA0, seed=1)
+    search.tell(search.ask(4), np.arange(4.0))
+    state = search.state_dict()
+    state[key] = {"episode": 2, "mean": state["mean"] + 1e-3,
+                  "rng_state": make_policy_search("cma-es", MEAN0, SIGMA0, seed=2).state_dict()["rng_state"]}[key]
+    import cma
+    with pytest.raises(RuntimeError, match=rf"did not reproduce the saved state \(saved with cma "
+                                           rf"{cma.__version__}, running cma {cma.__version__}\)"):
+        policy_search_from_state(state)
+
+
+def test_cma_es_prints_and_writes_nothing(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    search = make_policy_search("cma-es", MEAN0, SIGMA0, seed=0)
+    for _ in range(3):
+        search.tell(search.ask(4), np.arange(4.0))
+    assert capsys.readouterr() == ("", "")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_loading_refuses_pickled_arrays(tmp_path):
+    search = make_policy_search("pi2-es", MEAN0, SIGMA0)
+    state = search.state_dict()
+    state["evil"] = np.array([{"a": 1}], dtype=object)
+    path = tmp_path / "pickled.npz"
+    np.savez(path, **state)
+    with pytest.raises(ValueError, match="allow_pickle=False"):
+        load_policy_search(path)
+
+
+def test_samples_of_the_wrong_shape_or_none():
+    search = make_policy_search("pi2-es", MEAN0, SIGMA0)
+    for bad in (np.zeros((3, 3, 2)), np.zeros((0, 2, 2))):
+        with pytest.raises(ValueError, match=r"samples must have shape \(C, B, D\) = \(C, 2, 2\) with C >= 1"):
+            search.tell(bad, RETURNS[:len(bad)])
+
+
+def test_result_shape_errors_name_the_expected_shape():
+    search = make_policy_search("pi2-es", MEAN0, SIGMA0)
+    with pytest.raises(ValueError, match=r"shape \(3,\), for 'pi2-es'; got \(2, 3\)$"):
+        search.tell(SAMPLES, np.zeros((2, 3)))              # no per-step hint: not (C, T)
+    with pytest.raises(ValueError, match=r"shape \(3,\), for 'pi2-es'; got \(2,\)$"):
+        search.tell(SAMPLES, np.zeros(2))
+    per_step = make_policy_search("pi2", MEAN0, SIGMA0)
+    with pytest.raises(ValueError, match=r"per-step rewards of shape \(C, T\) = \(3, T\) with T >= 1"):
+        per_step.tell(SAMPLES, np.zeros((2, 3)))
+    nan = RETURNS.copy()
+    nan[0] = np.nan
+    with pytest.raises(ValueError, match=r"count a failed rollout with return 0 \(docs/method.md section 5\)"):
+        search.tell(SAMPLES, nan)
+
+
+def test_covariance_checks_are_relative_to_each_block():
+    big = SIGMA0.copy()
+    big[0] *= 1e6
+    big[0, 0, 1] += 1e-5                               # 1e-11 of the block: rounding
+    make_policy_search("pi2-es", MEAN0, big)
+    big[1, 0, 1] += 1e-3                               # 1e-3 of its own block, 1e-9 of the largest
+    with pytest.raises(ValueError, match=r"covariances\[1\] is not symmetric.*pass 0\.5 \* \(S \+ S\^T\)"):
+        make_policy_search("pi2-es", MEAN0, big)
+    zero = SIGMA0.copy()
+    zero[1] = 0.0
+    with pytest.raises(ValueError, match=r"covariances\[1\] is not positive definite"):
+        make_policy_search("pi2-es", MEAN0, zero)
+
+
+@pytest.mark.parametrize("build, error, message", [
+    (lambda: sigma_schedule(-1, 5), ValueError, "episode must be an integer >= 0; got -1"),
+    (lambda: sigma_schedule(0, 0), ValueError, "n_episodes must be an integer >= 1; got 0"),
+    (lambda: sigma_schedule(0, 5, sigma0=0.0), ValueError, "sigma0 must be > 0; got 0.0"),
+    (lambda: sigma_schedule(0, 5, decay_start=-1.0), ValueError, "decay_start must be >= 0; got -1.0"),
+    (lambda: rollout_probabilities(RETURNS, h=0.0), ValueError, "h must be > 0; got 0.0"),
+    (lambda: rollout_probabilities(RETURNS, weighting="soft"), ValueError,
+     "weighting must be one of ('thesis', 'range'); got 'soft'"),
+    (lambda: rollout_probabilities(REWARDS), ValueError, "returns must have shape (C,); got (3, 3)"),
+    (lambda: rollout_probabilities(RETURNS, per_step=True), ValueError,
+     "per-step results must have shape (C, T); got (3,)"),
+    (lambda: PI2ES(MEAN0, SIGMA0, sigma0=-1.0), ValueError, "sigma0 must be > 0; got -1.0"),
+    (lambda: PI2ES(MEAN0, SIGMA0, decay_start=-0.5), ValueError, "decay_start must be >= 0; got -0.5"),
+    (lambda: PI2ES(MEAN0, SIGMA0, h=0.0), ValueError, "h must be > 0; got 0.0"),
+    (lambda: PI2ES(MEAN0, SIGMA0, h=True), TypeError, "h must be a real number; got True"),
+    (lambda: PI2ESCov(MEAN0, SIGMA0, floor_fraction=-0.1), ValueError, "floor_fraction must be >= 0; got -0.1"),
+    (lambda: PI2ESCov(MEAN0, SIGMA0, floor_fraction=1.5), ValueError, "floor_fraction must be in [0, 1]; got 1.5"),
+    (lambda: PI2ESCov(MEAN0, SIGMA0, min_eigenvalue=-1.0), ValueError, "min_eigenvalue must be >= 0; got -1.0"),
+    (lambda: PI2ESCov(MEAN0, SIGMA0, floor_fraction=0.0), ValueError,
+     "floor_fraction and min_eigenvalue are both 0: the covariance update can collapse to a singular "
+     "matrix; set floor_fraction > 0 (default 1e-2) or min_eigenvalue > 0"),
+    (lambda: PoWER(MEAN0, SIGMA0, n_best=0), ValueError, "n_best must be an integer >= 1; got 0"),
+    (lambda: CMAES(MEAN0, SIGMA0, sigma0=0.0), ValueError, "sigma0 must be > 0; got 0.0"),
+    (lambda: CMAES(MEAN0, SIGMA0, popsize=1), ValueError, "popsize must be an integer >= 2; got 1"),
+    (lambda: CMAES(MEAN0, SIGMA0).tell(SAMPLES, RETURNS), RuntimeError, "cma-es: tell() needs the samples of an ask()"),
+    (lambda: PI2ES(MEAN0, SIGMA0, seed=True), TypeError,
+     "seed must be an int, None or a numpy.random.Generator; got True"),
+    (lambda: PI2ES(MEAN0, SIGMA0, seed=1.5), TypeError, "seed must be an int, None or a numpy.random.Generator"),
+    (lambda: PI2ES([[0.0, np.nan]], SIGMA0[:1]), ValueError, "mean contains NaN or inf"),
+    (lambda: PI2ES(MEAN0, np.full_like(SIGMA0, np.inf)), ValueError, "covariances contains NaN or inf"),
+    (lambda: make_policy_search("pi2-es", MEAN0, SIGMA0, n_best=3), TypeError,
+     "'pi2-es' does not take option(s) n_best; its options are n_episodes, weighting, h, sigma0, "
+     "decay_start, seed"),
+    (lambda: policy_search_from_state([("method", "pi2")]), TypeError, "state must be a mapping; got list"),
+    (lambda: PI2ES.from_state_dict(PI2ESCov(MEAN0, SIGMA0).state_dict()), ValueError,
+     "state is for method 'pi2-es-cov', not 'pi2-es'; use policy_search_from_state() to dispatch on the method"),
+    (lambda: policy_search_from_state({**PI2ES(MEAN0, SIGMA0).state_dict(),
+                                       "rng_state": '{"bit_generator": "default_rng", "state": {}}'}),
+     ValueError, "rng_state names unknown bit generator 'default_rng'"),
+    (lambda: policy_search_from_state({**CMAES(MEAN0, SIGMA0).state_dict(), "history_returns": np.zeros(3)}),
+     ValueError, "cma-es: history_returns must be (episodes, popsize); got shape (3,)"),
+])
+def test_bad_arguments_are_named(build, error, message):
+    with pytest.raises(error) as info:
+        build()
+    assert message in str(info.value)
+
+
+def test_boundary_values_are_accepted():
+    PoWER(MEAN0, SIGMA0, n_best=1)
+    CMAES(MEAN0, SIGMA0, popsize=2)
+    PI2ESCov(MEAN0, SIGMA0, floor_fraction=1.0)
+    PI2ESCov(MEAN0, SIGMA0, floor_fraction=0.0, min_eigenvalue=1e-6)
+    assert sigma_schedule(0, 5, decay_start=0.0) == 1.0
+    assert sigma_schedule(0, 5, sigma0=1e-300) == 1e-300

@@ -938,7 +938,12 @@ class CMAES(PolicySearch):
         self._rng = _rng_from_json(state["initial_rng_state"])
         self._initial_rng_state = str(state["initial_rng_state"])
         history = np.asarray(state["history_returns"], dtype=float)
-        for returns in history.reshape(len(history), -1):
+        if history.ndim != 2:
+            raise ValueError(
+                "cma-es: history_returns must be (episodes, popsize); got "
+                f"shape {history.shape}")
+        # No reshape: a state saved before the first tell has shape (0, popsize).
+        for returns in history:
             self.tell(self.ask(len(returns)), returns)
         if int(state["pending"]):
             self.ask(self._popsize)
