@@ -688,7 +688,7 @@ class PoWER(_ScheduledSearch):
         if (results < 0).any():
             worst = int(np.argmin(results))
             raise ValueError(
-                f"PoWER needs non-negative returns; got {results[worst]!r} at "
+                f"PoWER needs non-negative returns; got {float(results[worst])!r} at "
                 f"rollout {worst}. Map returns to >= 0 with a transform fixed "
                 "for the whole run (e.g. exp(-cost)), not a per-episode shift")
         return results
