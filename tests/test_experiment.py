@@ -166,6 +166,15 @@ def test_report_from_the_table_alone_is_the_same_twice(grid, tmp_path):
         # Each claim is marked, whichever way (the verdicts are reported, not asserted).
         assert sum(f"**{v}**" in text for v in ("holds", "does not hold", "cannot tell")) >= 1
         assert text.count("**") == 6
+        assert "Notes" not in text
+    # Hand-written notes beside the table end results.md as they are.
+    (saved / "notes.md").write_text("Draw: what limits it.\n\n- tried: a\n")
+    noted = {p.name: p.read_bytes() for p in write_report(saved / "table.csv", saved / "c")}
+    assert noted["results.md"].decode().endswith(
+        "## Notes (`notes.md`, written by hand beside the table)\n\nDraw: what limits it.\n\n- tried: a\n")
+    assert noted["results.md"].startswith(first["results.md"].rstrip(b"\n"))
+    assert {k: v for k, v in noted.items() if k != "results.md"} == {k: v for k, v in first.items()
+                                                                     if k != "results.md"}
 
 
 def test_report_cli_and_bad_input_name_the_flag(grid, tmp_path, capsys):

@@ -300,6 +300,9 @@ def plot_dense(cells, skill: str, path: Path) -> Path:
 
 
 # --------------------------------------------------------------------------- results.md
+#: Hand-written findings beside the table, appended to ``results.md`` as they are.
+NOTES_NAME = "notes.md"
+
 def _skill_section(cells, skill: str) -> list[str]:
     mine = [c for c in cells if c.skill == skill]
     n = max(c.success.shape[1] for c in mine)
@@ -319,8 +322,9 @@ def _skill_section(cells, skill: str) -> list[str]:
     return lines
 
 
-def results_markdown(cells, table_name: str) -> str:
-    """``results.md``: per skill the success table and AUC; the claims with their numbers."""
+def results_markdown(cells, table_name: str, notes: str | None = None) -> str:
+    """``results.md``: per skill the success table and AUC; the claims with their numbers;
+    then ``notes`` verbatim (what the table cannot hold: what limits a skill, what was tried)."""
     rows = sum(c.success.size for c in cells)
     lines = ["# Experiment results", "",
              f"From `{table_name}` alone ({rows} greedy executions of {sum(len(c.runs) for c in cells)} "
@@ -339,13 +343,16 @@ def results_markdown(cells, table_name: str) -> str:
         lines += [f"{i}. {text} **{verdict}**", ""]
         lines += [f"   - {line}" for line in evidence] or ["   - no cells to compare in this table"]
         lines.append("")
+    if notes:
+        lines += [f"## Notes (`{NOTES_NAME}`, written by hand beside the table)", "", notes.strip(), ""]
     return "\n".join(lines)
 
 
 def write_report(table, out_dir=None) -> list[Path]:
     """Figures (``SKILL_methods.png``, ``SKILL_dense.png``) and ``results.md`` from the
     table at ``table`` (a file, or a grid folder holding ``table.csv``) into ``out_dir``
-    (default: the table's folder). The same table gives the same bytes."""
+    (default: the table's folder). A ``notes.md`` beside the table ends ``results.md``
+    verbatim. The same table and notes give the same bytes."""
     table = Path(table)
     if table.is_dir():
         table = table / TABLE_NAME
@@ -357,5 +364,7 @@ def write_report(table, out_dir=None) -> list[Path]:
     for skill in dict.fromkeys(c.skill for c in cells):
         written.append(plot_methods(cells, skill, out_dir / f"{skill}_methods.png"))
         written.append(plot_dense(cells, skill, out_dir / f"{skill}_dense.png"))
-    written.append(atomic_write_text(out_dir / "results.md", results_markdown(cells, table.name)))
+    notes_path = table.parent / NOTES_NAME
+    notes = notes_path.read_text(encoding="utf-8") if notes_path.is_file() else None
+    written.append(atomic_write_text(out_dir / "results.md", results_markdown(cells, table.name, notes)))
     return written
