@@ -23,6 +23,7 @@ from drake_skill.action.dmp import (
     initial_weights,
     integrate,
     phase,
+    validate_demonstration,
 )
 from drake_skill.action.quaternion import quaternion_distance, rotation_angle
 
@@ -450,3 +451,161 @@ def test_ude_rotation_columns_scale_from_a_rotated_start():
     out = integrate(Dmp(dmp.weights, y0, dmp.goal, dmp.tau), fit.config, t)
     np.testing.assert_allclose(yaw(out[:, 3:]), -0.1 + 1.5 * profile, atol=0.005)
     np.testing.assert_allclose(out[:, 4:6], 0.0, atol=1e-9)     # still a turn about z only
+
+
+# ---------------------------------------------------------------------------
+# What the mutation audit of dmp.py found untested (issue 33, docs/mutation.md)
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("eps", [4e-5, -4e-5, 1e-9])
+def test_discretisation_near_critical_damping_matches_expm(eps):
+    """|s h| below 1e-3 but not 0 (nearly critically damped): the series branch of sinh(s h)/s."""
+    k, tau, h = 100.0, 1.0, 0.01
+    d = 2.0 * math.sqrt(k) * (1.0 + eps)
+    m = np.zeros((3, 3))
+    m[0, 1], m[1, 0], m[1, 1], m[1, 2] = 1.0, -k / tau**2, -d / tau, 1.0 / tau**2
+    e = scipy.linalg.expm(m * h)
+    ad, bd = e[:2, :2], e[:2, 2]
+    b, a = _discrete_filter(k, d, tau, h)
+    np.testing.assert_allclose(b, [0.0, bd[0], -ad[1, 1] * bd[0] + ad[0, 1] * bd[1]], rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(a, [1.0, -np.trace(ad), np.linalg.det(ad)], rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.parametrize("quaternion", ["vector", "ude"])
+def test_off_grid_times_interpolate_between_grid_samples(demo, quaternion):
+    """Times off the integration grid are the linear (quaternions: normalised linear)
+    interpolation of the two grid samples around them; past the grid's end, its last sample."""
+    times, poses = demo
+    cfg = DmpConfig(quaternion=quaternion)
+    dmp = fit_dmp(times[::5], poses[::5], cfg)
+    rng = np.random.default_rng(0)
+    weights = dmp.weights + rng.normal(0.0, 20.0, dmp.weights.shape)   # a visibly curved path
+    grid = cfg.dt * np.arange(int(round(dmp.tau / cfg.dt)) + 1)
+    on = integrate(dmp, cfg, grid, weights=weights)
+    query = np.array([0.0, 0.25 * cfg.dt, 7.6 * cfg.dt, 0.5 * dmp.tau + 0.3 * cfg.dt, grid[-1]])
+    got = integrate(dmp, cfg, query, weights=weights)
+    for t, row in zip(query, got):
+        i = min(int(np.floor(t / cfg.dt + 1e-12)), len(grid) - 2)
+        f = t / cfg.dt - i
+        expected = (1.0 - f) * on[i] + f * on[i + 1]
+        expected[3:] /= np.linalg.norm(expected[3:])
+        # (vector form: the 4-vector is interpolated before it is normalised: 1e-11 apart)
+        np.testing.assert_allclose(row, expected, atol=1e-9)
+    assert not np.allclose(got[2], on[7]) and not np.allclose(got[2], on[8])
+
+
+def test_uniform_times_of_another_step_are_integrated_on_a_finer_grid(demo):
+    """Times 0, d, 2d, ... with d a multiple of dt (10 Hz) give the grid's own samples."""
+    times, poses = demo
+    cfg = DmpConfig()
+    dmp = fit_dmp(times, poses, cfg)
+    fine = integrate(dmp, cfg, cfg.dt * np.arange(int(round(dmp.tau / cfg.dt)) + 1))
+    step = int(round(0.1 / cfg.dt))
+    coarse = integrate(dmp, cfg, 0.1 * np.arange(int(dmp.tau / 0.1) + 1))
+    np.testing.assert_allclose(coarse, fine[::step][:len(coarse)], atol=1e-12)
+    single = integrate(dmp, cfg, [0.0])                       # one time: the start
+    np.testing.assert_allclose(single[0], dmp.y0, atol=1e-12)
+
+
+def test_ude_single_trajectory_equals_the_batch_for_rotations_about_every_axis():
+    """The scalar recursion of one orientation DMP and the batched one agree, for
+    forcing that turns the hand about x, y and z (and an unchanged goal orientation)."""
+    cfg = DmpConfig(quaternion="ude", n_basis=8)
+    start = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0])
+    for goal_q, axis in (([1.0, 0.0, 0.0, 0.0], 0), ([0.8, 0.0, 0.6, 0.0], 1), ([0.6, 0.0, 0.0, 0.8], 2)):
+        weights = np.zeros((8, 6))
+        weights[:, 3 + axis] = np.linspace(40.0, -40.0, 8)
+        weights[:, 3 + (axis + 1) % 3] = 15.0
+        dmp = Dmp(weights, start, np.r_[0.1, 0.2, 0.3, goal_q], 2.0)
+        times = np.linspace(0.0, 2.0, 41)
+        single = integrate(dmp, cfg, times)
+        batch = integrate(dmp, cfg, times, weights=np.stack([weights, 2.0 * weights]))
+        np.testing.assert_allclose(single, batch[0], atol=1e-12)
+        np.testing.assert_allclose(np.linalg.norm(single[:, 3:], axis=1), 1.0, atol=1e-12)
+        assert rotation_angle(single[20, 3:], start[3:]) > 0.05
+
+
+_W5 = np.zeros((5, 7))
+_T20 = np.linspace(0.0, 1.0, 20)
+_P20 = np.tile(Y0, (20, 1))
+_P20[:, 0] = np.linspace(0.0, 0.3, 20)
+_CFG5 = DmpConfig(n_basis=5)
+
+
+def _nan_at(array, row, col):
+    out = np.array(array, dtype=float)
+    out[row, col] = np.nan
+    return out
+
+
+@pytest.mark.parametrize("build, message", [
+    (lambda: integrate(Dmp(_W5, Y0, GOAL, 1.0), _CFG5, np.zeros((2, 2))), "times: expected shape (T,), got (2, 2)"),
+    (lambda: integrate(Dmp(_W5, Y0, GOAL, 1.0), _CFG5, []), "times: expected at least one time, got none"),
+    (lambda: integrate(Dmp(_W5, Y0, GOAL, 1.0), _CFG5, [0.0, np.nan]), "times: contains NaN or inf"),
+    (lambda: integrate(Dmp(_W5, Y0, GOAL, 1.0), _CFG5, [-0.1, 0.5]),
+     "times: expected times >= 0 s from the start of the movement, min is -0.1"),
+    (lambda: integrate(Dmp(_W5, Y0, GOAL, 1.0), _CFG5, [0.5, 0.2]), "times: expected non-decreasing times"),
+    (lambda: integrate(Dmp(_W5, Y0, GOAL, 1.0), DmpConfig(n_basis=5, quaternion="ude")),
+     "weights: expected shape (5, 6) or (S, 5, 6), got (5, 7)"),
+    (lambda: exploration_covariance([_W5, _W5 + 1.0], ridge=-1.0), "ridge: expected a finite value >= 0, got -1.0"),
+    (lambda: exploration_covariance([_W5, _W5 + 1.0], floor=0.0), "floor: expected a finite value > 0, got 0.0"),
+    (lambda: exploration_covariance([_W5, _W5 + 1.0], floor=np.inf), "floor: expected a finite value > 0, got inf"),
+    (lambda: exploration_covariance([_W5, _W5 + np.nan]), "weights: contain NaN or inf"),
+    (lambda: fit_weights(_T20, _P20[:10], _CFG5), "times/values: expected shapes (T,) and (T, n), got (20,) and (10, 7)"),
+    (lambda: fit_weights(_T20[:5], _P20[:5, 0], _CFG5), "times/values: expected shapes (T,) and (T, n), got (5,) and (5,)"),
+    (lambda: fit_weights(_T20[:2], _P20[:2, :3], DmpConfig(n_basis=2)), "times: expected at least 3 samples, got 2"),
+    (lambda: fit_weights(np.r_[_T20[:-1], np.nan], _P20[:, :3], _CFG5), "times/values: contain NaN or inf"),
+    (lambda: fit_weights(_T20, _nan_at(_P20[:, :3], 3, 1), _CFG5), "times/values: contain NaN or inf"),
+    (lambda: fit_weights(np.r_[_T20[:5], _T20[4:-1]], _P20[:, :3], _CFG5),
+     "times: expected strictly increasing timestamps"),
+    (lambda: validate_demonstration(_T20, _P20[:10]), "demonstration: times has 20 samples but poses has 10"),
+    (lambda: validate_demonstration(_T20[:2], _P20[:2]), "demonstration: expected at least 3 samples, got 2"),
+    (lambda: validate_demonstration(_T20, _nan_at(_P20, 3, 5)),
+     "demonstration poses: contains NaN or inf (first at sample 3, column 5)"),
+    (lambda: validate_demonstration(np.r_[_T20[:5], _T20[4:-1]], _P20, name="demo 2"),
+     "demo 2 times: expected strictly increasing timestamps, got t[4]=0.21052631578947367 >= "
+     "t[5]=0.21052631578947367"),
+    (lambda: initial_weights([], 0), "dmps: expected at least one fitted DMP, got none"),
+    (lambda: DmpConfig(n_basis=1).validate(), "DmpConfig.n_basis: expected an integer >= 2, got 1"),
+    (lambda: DmpConfig(n_basis=True).validate(), "DmpConfig.n_basis: expected an integer >= 2, got True"),
+    (lambda: DmpConfig(n_basis=5.0).validate(), "DmpConfig.n_basis: expected an integer >= 2, got 5.0"),
+    (lambda: DmpConfig(K=0.0).validate(), "DmpConfig.K: expected a finite value > 0, got 0.0"),
+    (lambda: DmpConfig(K="1").validate(), "DmpConfig.K: expected a finite value > 0, got '1'"),
+    (lambda: DmpConfig(D=-1.0).validate(), "DmpConfig.D: expected a finite value >= 0, got -1.0"),
+    (lambda: DmpConfig(D=np.nan).validate(), "DmpConfig.D: expected a finite value >= 0, got nan"),
+    (lambda: DmpConfig(scaled_dims=[True]).validate(),
+     "DmpConfig.scaled_dims: expected distinct weight columns in [0, 7), got [True]"),
+    (lambda: DmpConfig(scaled_dims=[7]).validate(),
+     "DmpConfig.scaled_dims: expected distinct weight columns in [0, 7), got [7]"),
+    (lambda: Dmp(np.zeros(7), Y0, GOAL, 1.0), "Dmp.weights: expected shape (B >= 2, 7 or 6), got (7,)"),
+    (lambda: Dmp(np.zeros((5, 5)), Y0, GOAL, 1.0), "Dmp.weights: expected shape (B >= 2, 7 or 6), got (5, 5)"),
+    (lambda: Dmp(np.zeros((1, 7)), Y0, GOAL, 1.0), "Dmp.weights: expected shape (B >= 2, 7 or 6), got (1, 7)"),
+    (lambda: Dmp(_W5, Y0[:6], GOAL, 1.0), "Dmp.y0: expected shape (7,), got (6,)"),
+    (lambda: Dmp(_W5 + np.nan, Y0, GOAL, 1.0), "Dmp.weights: contains NaN or inf (shape (5, 7))"),
+    (lambda: Dmp(_W5, Y0, GOAL, 1e9), "Dmp.tau: 1000000000.0 s is longer than the 3600 s accepted; expected the "
+                                      "duration of one skill execution in seconds"),
+    (lambda: Dmp(_W5, np.r_[Y0[:3], 2.0, 0.0, 0.0, 0.0], GOAL, 1.0),
+     "Dmp.y0: quaternion [2. 0. 0. 0.] has norm 2; expected a unit quaternion (w, x, y, z) within 0.01"),
+    (lambda: fit_demonstrations([(_T20, _P20)], _CFG5),
+     "demonstrations: expected at least 2 (covariance across fits), got 1"),
+    (lambda: fit_demonstrations([(_T20, _P20, 1), (_T20, _P20)], _CFG5),
+     "demonstrations[0]: expected a pair (times, poses), got 3 items"),
+    (lambda: fit_demonstrations([(_T20, _P20), (_T20, _P20[:10])], _CFG5),
+     "demonstrations[1]: times has 20 samples but poses has 10"),
+])
+def test_each_bad_dmp_input_is_named_in_full(build, message):
+    with pytest.raises(ValueError) as info:
+        build()
+    assert str(info.value) == message
+
+
+def test_smallest_valid_dmp_inputs():
+    assert integrate(Dmp(_W5, Y0, GOAL, 1.0), _CFG5, [0.2, 0.2]).shape == (2, 7)    # repeated times
+    assert fit_weights(_T20[:3], _P20[:3, :3], DmpConfig(n_basis=2)).shape == (2, 3)
+    assert validate_demonstration(_T20[:3], _P20[:3])[0].shape == (3,)
+    assert initial_weights([Dmp(_W5, Y0, GOAL, 1.0)], 0)[0] == 0
+    assert DmpConfig(n_basis=2).validate().n_basis == 2 and DmpConfig(D=0.0).validate().D == 0.0
+    assert Dmp(np.zeros((2, 7)), Y0, GOAL, 1.0).n_basis == 2 and Dmp(_W5, Y0, GOAL, 3600.0).tau == 3600.0
+    cov = exploration_covariance([_W5, _W5 + 1.0], ridge=0.0)
+    np.testing.assert_allclose(cov[0], 0.5 * np.ones((7, 7)) + 1e-8 * np.eye(7), rtol=1e-12)
