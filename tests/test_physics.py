@@ -230,22 +230,14 @@ def test_scripted_skills_succeed_on_10_seeds_below_the_reflex_and_parked_fails(s
 
 def test_no_robot_self_collision_at_home():
     """Without the station's robot-internal filter, no two robot geometries overlap at q_home."""
-    from pydrake.multibody.parsing import Parser
     from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
     from pydrake.systems.framework import DiagramBuilder
 
-    from drake_skill.station.controller import X_FLANGE_HAND
-    from drake_skill.station.models import add_package_paths, model_url
+    from drake_skill.station.controller import add_arm_and_hand
 
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
-    parser = Parser(plant)
-    add_package_paths(parser.package_map())
-    arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
-    hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
-    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
-    plant.WeldFrames(plant.GetFrameByName("panda_link8", arm), plant.GetFrameByName("panda_hand", hand),
-                     X_FLANGE_HAND)
+    arm, hand = add_arm_and_hand(plant)
     plant.Finalize()
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()

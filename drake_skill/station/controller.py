@@ -42,6 +42,22 @@ PANDA_QD_MAX = limits.QD_MAX
 FINGER_ACCEL_MAX = 4.0
 
 
+def add_arm_and_hand(plant: MultibodyPlant) -> tuple:
+    """Adds the Panda arm (base welded to the world) and its hand (welded to the
+    flange with ``X_FLANGE_HAND``) to an unfinalised ``plant``; returns the two
+    model instances. The stations' own plants come from scenario directives; this
+    is for the auxiliary plants (gravity compensation, the hardware station's
+    drawing) that need the same arm and hand."""
+    parser = Parser(plant)
+    add_package_paths(parser.package_map())
+    arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
+    hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
+    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
+    plant.WeldFrames(plant.GetFrameByName("panda_link8", arm), plant.GetFrameByName("panda_hand", hand),
+                     X_FLANGE_HAND)
+    return arm, hand
+
+
 def make_control_plant() -> MultibodyPlant:
     """A 7-DoF kinematic model of the arm with the TCP frame named ``ee``."""
     plant = MultibodyPlant(time_step=0.0)

@@ -584,21 +584,17 @@ class HardwareStation(Diagram):
         from pydrake.systems.primitives import MatrixGain, PassThrough
         from pydrake.systems.rendering import MultibodyPositionToGeometryPose
 
-        from drake_skill.station.controller import X_FLANGE_HAND
+        from drake_skill.station.controller import add_arm_and_hand
         from drake_skill.station.models import add_package_paths, add_panda_illustration, model_url
 
         scene_graph = builder.AddNamedSystem("viz_scene_graph", SceneGraph())
         plant = MultibodyPlant(0.0)
         plant.RegisterAsSourceForSceneGraph(scene_graph)
+        arm, hand = add_arm_and_hand(plant)
         parser = Parser(plant)
         add_package_paths(parser.package_map())
-        arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
-        hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
         table = parser.AddModels(url=model_url("table.sdf"))[0]
         add_panda_illustration(plant, scene_graph, (arm, hand))
-        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
-        plant.WeldFrames(plant.GetFrameByName("panda_link8", arm), plant.GetFrameByName("panda_hand", hand),
-                         X_FLANGE_HAND)
         plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
         plant.Finalize()
         if plant.num_positions() != N_JOINTS + 2:

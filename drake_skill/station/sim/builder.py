@@ -67,8 +67,8 @@ from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 from pydrake.systems.sensors import PixelType, RgbdSensor
 from pydrake.common.value import AbstractValue, Value
 
-from drake_skill.station.controller import X_FLANGE_HAND, X_HAND_TCP, EndEffectorController, make_finger_limiter
-from drake_skill.station.models import add_package_paths, add_panda_illustration, model_url
+from drake_skill.station.controller import X_HAND_TCP, EndEffectorController, add_arm_and_hand, make_finger_limiter
+from drake_skill.station.models import add_package_paths, add_panda_illustration
 from drake_skill.station.config import StationConfig, validate_station_config
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor
@@ -86,13 +86,7 @@ _SURFACES = (
 def make_gravity_plant() -> MultibodyPlant:
     """Arm + hand (9 DoF: joints 1..7, fingers) as the station has them, for gravity compensation."""
     plant = MultibodyPlant(time_step=0.0)
-    parser = Parser(plant)
-    add_package_paths(parser.package_map())
-    arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
-    hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
-    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
-    plant.WeldFrames(plant.GetFrameByName("panda_link8", arm), plant.GetFrameByName("panda_hand", hand),
-                     X_FLANGE_HAND)
+    add_arm_and_hand(plant)
     plant.Finalize()
     return plant
 
