@@ -14,12 +14,17 @@ import numpy as np
 import pytest
 
 from drake_skill.learning.policy_search import (
+    CMAES,
     METHODS,
     PER_STEP_METHODS,
+    PI2ES,
+    PI2ESCov,
+    PoWER,
     load_policy_search,
     make_policy_search,
     policy_search_from_state,
     reward_to_go,
+    rollout_probabilities,
     sigma_schedule,
 )
 
@@ -605,15 +610,6 @@ def test_cma_es_needs_its_own_samples():
 # What the mutation audit of policy_search.py found untested (issue 33,
 # docs/mutation.md): defaults, boundaries, named errors, state round trips
 # ---------------------------------------------------------------------------
-
-from drake_skill.learning.policy_search import (  # noqa: E402
-    CMAES,
-    PI2ES,
-    PI2ESCov,
-    PoWER,
-    rollout_probabilities,
-)
-
 
 def _options(search):
     state = search.state_dict()
