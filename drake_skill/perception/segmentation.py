@@ -200,7 +200,7 @@ def check_organised_cloud(xyz, rgb, image_shape) -> tuple[np.ndarray, np.ndarray
     return xyz, rgb
 
 
-def _check_points(points, name: str, min_rows: int = 1) -> np.ndarray:
+def _check_points(points, name: str, min_rows: int) -> np.ndarray:
     """(M, 3) finite float64 array, or ValueError naming ``name``."""
     arr = np.asarray(points)
     if arr.dtype == object or not np.issubdtype(arr.dtype, np.number):
@@ -444,7 +444,7 @@ def fit_footprint(xy, nominal_yaw: float = 0.0, closeness: float = 0.001,
     give the middle one. Of the four
     equivalent yaws the one nearest ``nominal_yaw`` is returned, with the
     extents ordered to match. At most ``max_points`` evenly strided points
-    are scored. Returns ``(centre (2,), extents (2,) along the yawed x and y, yaw in (-pi, pi])``.
+    are scored. Returns ``(centre (2,), extents (2,) along the yawed x and y, yaw in [-pi, pi))``.
     """
     xy = np.asarray(xy)
     if xy.ndim != 2 or xy.shape[1] != 2 or xy.shape[0] < 3:
@@ -531,7 +531,7 @@ def resample_points(points, n_points: int = N_POINTS, seed: "int | np.random.Gen
     points = _check_points(points, "points", min_rows=1)
     if int(n_points) != n_points or n_points < 1:
         raise ValueError(f"n_points: expected a positive integer, got {n_points!r}")
-    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    rng = np.random.default_rng(seed)          # a Generator passes through unchanged
     m = points.shape[0]
     if m >= n_points:
         idx = rng.choice(m, size=int(n_points), replace=False)
