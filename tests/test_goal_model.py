@@ -15,6 +15,7 @@ from drake_skill.reward.goal_model import (
     GoalHMM,
     GoalModelConfig,
     _backward_log,
+    check_sequences,
     forward_backward,
     forward_log,
     n_free_parameters,
@@ -381,3 +382,266 @@ def test_full_covariances_from_the_public_property(ct):
                "tied": lambda: np.broadcast_to(c, (2, 3, 3)),
                "full": lambda: c}[ct]()
     np.testing.assert_array_equal(_full_covars(m), by_hand)
+
+
+# ----------------------------------------------------------- exact contracts
+def _small_model_arrays(k=2, d=2):
+    """A hand-written fitted model (no fit): arrays and metadata as :meth:`GoalHMM.to_arrays` gives them."""
+    arrays = {"startprob": np.array([1.0, 0.0]), "transmat": np.array([[0.9, 0.1], [0.0, 1.0]]),
+              "means": np.array([[0.0, 0.0], [1.0, 0.5]]),
+              "covars": np.array([[[0.04, 0.01], [0.01, 0.09]], [[0.01, 0.0], [0.0, 0.01]]]),
+              "terminal_states": np.array([1]), "lengths": np.array([20, 30]),
+              "loglik_per_step": np.array([-1.5, -1.2])}
+    return arrays, {"n_states": k, "n_features": d, "covariance_type": "full"}
+
+
+@pytest.mark.parametrize("call, message", [
+    (lambda: check_sequences(np.zeros(5)), "X: expected a 2-D array (frames, features), got shape (5,)"),
+    (lambda: check_sequences(np.zeros((0, 8))), "X: empty sequence (shape (0, 8)); expected at least one frame"),
+    (lambda: check_sequences(np.zeros((10, 7)), name="G", n_features=8),
+     "G: expected 8 features per frame, got shape (10, 7)"),
+    (lambda: check_sequences(np.array([[0.0, 1.0], [np.inf, 0.0], [np.nan, 0.0]])),
+     "X: non-finite value inf at frame 1, feature 0"),
+    (lambda: check_sequences(np.zeros((3, 2)), [[1, 2]]),
+     "lengths: expected a non-empty 1-D list of integers, got [[1, 2]]"),
+    (lambda: check_sequences(np.zeros((3, 2)), []), "lengths: expected a non-empty 1-D list of integers, got []"),
+    (lambda: check_sequences(np.zeros((3, 2)), [np.nan]),
+     "lengths: expected a non-empty 1-D list of integers, got [nan]"),
+    (lambda: check_sequences(np.zeros((3, 2)), [1.5, 1.5]),
+     "lengths: expected a non-empty 1-D list of integers, got [1.5, 1.5]"),
+    (lambda: check_sequences(np.zeros((3, 2)), [3, 0]), "lengths: every sequence needs at least one frame, got [3, 0]"),
+    (lambda: check_sequences(np.zeros((3, 2)), [2, 2]), "lengths: sum 4 does not match the 3 frames of X"),
+    (lambda: n_free_parameters(3, 8, "banana"),
+     "covariance_type: 'banana', expected one of ('spherical', 'diag', 'full', 'tied')"),
+    (lambda: GoalHMM(criterion="hqc").fit(np.zeros((5, 2))), "criterion: 'hqc', expected one of ('aic', 'bic')"),
+    (lambda: GoalHMM(covariance_types=[]).fit(np.zeros((5, 2))),
+     "covariance_types: [], expected a non-empty subset of ('spherical', 'diag', 'full', 'tied')"),
+    (lambda: GoalHMM(covariance_types=["diag", "round"]).fit(np.zeros((5, 2))),
+     "covariance_types: ['diag', 'round'], expected a non-empty subset of ('spherical', 'diag', 'full', 'tied')"),
+    (lambda: GoalHMM(n_states_min=0).fit(np.zeros((5, 2))),
+     "n_states_min, n_states_max: (0, 8), expected 1 <= n_states_min <= n_states_max"),
+    (lambda: GoalHMM(n_states_min=5, n_states_max=4).fit(np.zeros((5, 2))),
+     "n_states_min, n_states_max: (5, 4), expected 1 <= n_states_min <= n_states_max"),
+    (lambda: GoalHMM(n_restarts=0).fit(np.zeros((5, 2))), "n_restarts, n_iter: (0, 100), expected >= 1"),
+    (lambda: GoalHMM(n_iter=0).fit(np.zeros((5, 2))), "n_restarts, n_iter: (4, 0), expected >= 1"),
+    (lambda: GoalHMM(tol=0.0).fit(np.zeros((5, 2))), "tol, covar_reg: (0.0, 0.001), expected > 0"),
+    (lambda: GoalHMM(covar_reg=-1.0).fit(np.zeros((5, 2))), "tol, covar_reg: (0.001, -1.0), expected > 0"),
+    (lambda: GoalHMM(n_states_min=3).fit(np.zeros((7, 2)), [5, 2]),
+     "lengths: demonstration 1 has 2 frames, fewer than the smallest state count n_states_min=3; "
+     "expected every demonstration to have >= 3 frames"),
+    (lambda: forward_backward(np.zeros((0, 2)), np.ones(2) / 2, np.eye(2)),
+     "log_b: expected shape (T >= 1, k), got (0, 2)"),
+    (lambda: forward_backward(np.array([[-np.inf, 0.0], [0.0, 0.0]]), np.array([1.0, 0.0]), np.eye(2)),
+     "forward_backward: the sequence has probability zero under the chain "
+     "(no state sequence allowed by startprob/transmat explains it)"),
+])
+def test_each_bad_goal_model_input_is_named_in_full(call, message):
+    with pytest.raises(ValueError) as info:
+        call()
+    assert str(info.value) == message
+
+
+def test_sequences_that_are_valid_at_the_edges():
+    X, lengths = check_sequences([[1, 2]])
+    assert X.dtype == float and lengths.tolist() == [1] and lengths.dtype.kind == "i"
+    X, lengths = check_sequences(np.zeros((3, 2)), [1.0, 2.0])
+    assert lengths.tolist() == [1, 2] and lengths.dtype.kind == "i"
+    # One state, one restart, one iteration: the smallest model fits (k = 1 has no transitions to count).
+    gm = GoalHMM(n_states_min=1, n_states_max=1, n_restarts=1, n_iter=1,
+                 covariance_types=["spherical"]).fit(np.arange(10.0).reshape(5, 2))
+    assert gm.n_states_ == 1 and gm.transmat_.tolist() == [[1.0]] and gm.startprob_.tolist() == [1.0]
+    assert gm.criterion_table_[0]["n_params"] == n_free_parameters(1, 2, "spherical") == 3
+
+
+@pytest.mark.parametrize("ct, covariance_params", [("spherical", 3), ("diag", 6), ("full", 9), ("tied", 3)])
+def test_parameter_counts_of_three_states_in_two_dimensions(ct, covariance_params):
+    assert n_free_parameters(3, 2, ct) == 2 + 6 + 6 + covariance_params
+
+
+def test_the_state_count_is_capped_by_the_shortest_demonstration():
+    _, X, lengths = _data(3, 2, [40, 3])
+    gm = GoalHMM(n_states_max=6, n_restarts=1, covariance_types=["diag"]).fit(X, lengths)
+    assert [row["k"] for row in gm.criterion_table_] == [2, 3]
+    for row in gm.criterion_table_:
+        if row["log_likelihood"] is not None:
+            p, ll = row["n_params"], row["log_likelihood"]
+            assert row["aic"] == float(-2 * ll + 2 * p) and row["bic"] == float(-2 * ll + p * np.log(43))
+
+
+def _multivariate_normal_logpdf(G, mean, cov):
+    diff = G - mean
+    _, logdet = np.linalg.slogdet(cov)
+    return -0.5 * (len(mean) * np.log(2 * np.pi) + logdet + np.einsum("td,de,te->t", diff, np.linalg.inv(cov), diff))
+
+
+def test_inference_of_a_hand_written_model():
+    """log_emission is the Gaussian log density; filtered, smoothed, score and decode agree with the
+    recursions and with hmmlearn's public API on a model with a forbidden transition."""
+    arrays, meta = _small_model_arrays()
+    gm = GoalHMM.from_arrays(arrays, meta)
+    rng = np.random.default_rng(2)
+    G = np.r_[rng.normal(0.0, 0.2, (6, 2)), rng.normal([1.0, 0.5], 0.1, (5, 2))]
+    log_b = gm.log_emission(G)
+    for i in range(2):
+        np.testing.assert_allclose(log_b[:, i], _multivariate_normal_logpdf(G, arrays["means"][i], arrays["covars"][i]),
+                                   rtol=1e-12)
+    filtered, smoothed, ll = forward_backward(log_b, arrays["startprob"], arrays["transmat"])
+    np.testing.assert_array_equal(gm.filtered_posteriors(G), filtered)
+    np.testing.assert_array_equal(gm.predict_proba(G), smoothed)
+    assert not np.allclose(filtered, smoothed)
+    ref = _reference(gm)
+    assert gm.score(G) == pytest.approx(ref.score(G), rel=1e-12) == pytest.approx(ll, rel=1e-12)
+    two = np.r_[G, G[::-1][:4]]
+    assert gm.score(two, [11, 4]) == pytest.approx(ref.score(two, [11, 4]), rel=1e-12)
+    log_prob, path = ref.decode(G)
+    assert np.array_equal(gm.decode(G), path) and path[0] == 0 and path[-1] == 1
+    assert viterbi(log_b, arrays["startprob"], arrays["transmat"])[1] == pytest.approx(log_prob, rel=1e-12)
+
+
+def test_samples_follow_the_model():
+    arrays, meta = _small_model_arrays()
+    gm = GoalHMM.from_arrays(arrays, meta)
+    G, states = gm.sample(400, random_state=3)
+    again = gm.sample(400, random_state=3)
+    assert np.array_equal(G, again[0]) and np.array_equal(states, again[1])
+    assert G.shape == (400, 2) and states[0] == 0 and np.all(np.diff(states) >= 0)      # 0 -> 1, never back
+    assert 4 <= np.argmax(states == 1) <= 40                                            # leaves 0 at rate 0.1
+    late = G[states == 1]
+    np.testing.assert_allclose(late.mean(axis=0), arrays["means"][1], atol=0.02)
+    np.testing.assert_allclose(np.cov(late.T), arrays["covars"][1], atol=0.003)
+    with pytest.raises(RuntimeError) as info:
+        GoalHMM().sample(3)
+    assert str(info.value) == "GoalHMM: not fitted; call fit() or from_arrays() first"
+
+
+def test_to_arrays_and_from_arrays_defaults():
+    arrays, meta = _small_model_arrays()
+    gm = GoalHMM.from_arrays(arrays, {})
+    assert (gm.n_states_, gm.n_features_in_, gm.covariance_type_, gm.restart_, gm.converged_, gm.n_iter_) == (
+        2, 2, "full", 0, True, 0)
+    assert np.isnan(gm.log_likelihood_) and gm.criterion_table_ == []
+    assert gm.get_params() == GoalHMM().get_params()
+    out, out_meta = GoalHMM.from_arrays(arrays, {**meta, "params": {"n_states_max": 5}, "restart": 2}).to_arrays()
+    assert sorted(out) == sorted(arrays)
+    for name, value in arrays.items():
+        np.testing.assert_array_equal(out[name], value)
+    assert out["terminal_states"].dtype.kind == "i" and out["lengths"].dtype.kind == "i"
+    assert out_meta == {"params": {**GoalHMM().get_params(), "n_states_max": 5}, "n_states": 2, "n_features": 2,
+                        "covariance_type": "full", "restart": 2, "converged": True, "n_iter": 0,
+                        "log_likelihood": out_meta["log_likelihood"], "criterion_table": []}
+    assert json.dumps(out_meta["params"]) and GoalHMM.from_config(GoalModelConfig()).get_params()["covar_reg"] == 0.03
+    unsorted = GoalHMM.from_arrays({**arrays, "terminal_states": np.array([1.0, 0.0])}, meta)
+    assert unsorted.terminal_states_.tolist() == [0, 1] and unsorted.terminal_states_.dtype.kind == "i"
+    with pytest.raises(RuntimeError):
+        GoalHMM().to_arrays()
+
+
+def _arrays_with(**changes):
+    arrays, _ = _small_model_arrays()
+    return {**arrays, **changes}
+
+
+@pytest.mark.parametrize("arrays, metadata, message", [
+    ({k: v for k, v in _arrays_with().items() if k not in ("means", "lengths")}, {},
+     "missing array(s) ['hmm/means', 'hmm/lengths']"),
+    (_arrays_with(), {"params": {"bogus": 1}},
+     "goal-model metadata 'params': GoalHMM.__init__() got an unexpected keyword argument 'bogus'"),
+    (_arrays_with(means=np.array([["a", "b"], ["c", "d"]])), {}, "hmm/means: dtype <U1, expected numbers"),
+    (_arrays_with(means=np.zeros(2)), {}, "hmm/means: shape (2,), expected (k, d) with k, d >= 1"),
+    (_arrays_with(means=np.zeros((0, 2))), {}, "hmm/means: shape (0, 2), expected (k, d) with k, d >= 1"),
+    (_arrays_with(transmat=np.eye(3)), {},
+     "hmm/transmat: shape (3, 3), expected (2, 2) for 2 states of 2 features (means (2, 2))"),
+    (_arrays_with(covars=np.stack([np.eye(3)] * 2)), {},
+     "hmm/covars: shape (2, 3, 3), expected (2, 2, 2) for 2 states of 2 features (means (2, 2))"),
+    (_arrays_with(means=np.array([[0.0, np.nan], [1.0, 0.5]])), {}, "hmm/means: contains NaN or inf"),
+    (_arrays_with(startprob=np.array([np.inf, 0.0])), {}, "hmm/startprob: contains NaN or inf"),
+    (_arrays_with(transmat=np.array([[0.9, 0.1], [np.nan, 1.0]])), {}, "hmm/transmat: contains NaN or inf"),
+    (_arrays_with(loglik_per_step=np.array([-1.0, np.nan])), {}, "hmm/loglik_per_step: contains NaN or inf"),
+    (_arrays_with(startprob=np.array([1.5, -0.5])), {},
+     "hmm/startprob: not a probability vector (sum 1, min -0.5); expected non-negative entries summing to 1"),
+    (_arrays_with(startprob=np.array([1.0, 2e-6])), {},
+     "hmm/startprob: not a probability vector (sum 1, min 2e-06); expected non-negative entries summing to 1"),
+    (_arrays_with(transmat=np.array([[0.9, 0.1], [1.5, -0.5]])), {},
+     "hmm/transmat: row 1 sums to 1 (min entry -0.5); expected non-negative rows summing to 1"),
+    (_arrays_with(transmat=np.array([[0.9, 0.1], [0.0, 1.0 + 2e-6]])), {},
+     "hmm/transmat: row 1 sums to 1 (min entry 0); expected non-negative rows summing to 1"),
+    (_arrays_with(covars=np.array([[[0.04, 0.01], [0.0, 0.09]], [[0.01, 0.0], [0.0, 0.01]]])), {},
+     "hmm/covars: not symmetric"),
+    (_arrays_with(terminal_states=np.array([[1]])), {},
+     "hmm/terminal_states: [[1]], expected a non-empty list of state indices"),
+    (_arrays_with(terminal_states=np.array([0.5])), {},
+     "hmm/terminal_states: [0.5], expected a non-empty list of state indices"),
+    (_arrays_with(terminal_states=np.array([-1])), {}, "hmm/terminal_states: [-1], expected distinct states in [0, 2)"),
+    (_arrays_with(terminal_states=np.array([1, 1])), {},
+     "hmm/terminal_states: [1, 1], expected distinct states in [0, 2)"),
+    (_arrays_with(lengths=np.array([20, 0])), {}, "hmm/lengths: [20, 0], expected demonstration frame counts >= 1"),
+    (_arrays_with(lengths=np.array([], dtype=int)), {}, "hmm/lengths: [], expected demonstration frame counts >= 1"),
+    (_arrays_with(lengths=np.array([20.5, 30])), {},
+     "hmm/lengths: [20.5, 30.0], expected demonstration frame counts >= 1"),
+    (_arrays_with(lengths=np.array([[20, 30]])), {},
+     "hmm/lengths: [[20, 30]], expected demonstration frame counts >= 1"),
+    (_arrays_with(loglik_per_step=np.array([-1.0, -1.0, -1.0])), {},
+     "hmm/loglik_per_step: shape (3,), expected one value per demonstration (2,)"),
+    (_arrays_with(), {"n_features": 5},
+     "goal-model metadata 'n_features' = 5 disagrees with hmm/means of shape (2, 2)"),
+    (_arrays_with(), {"covariance_type": "banana"},
+     "goal-model metadata 'covariance_type' = 'banana', expected one of ('spherical', 'diag', 'full', 'tied')"),
+])
+def test_each_bad_saved_goal_model_is_named_in_full(arrays, metadata, message):
+    with pytest.raises(ValueError) as info:
+        GoalHMM.from_arrays(arrays, metadata, prefix="hmm/")
+    assert str(info.value) == message
+
+
+def test_saved_probabilities_within_the_tolerance_load():
+    gm = GoalHMM.from_arrays(_arrays_with(startprob=np.array([1.0, 5e-7]),
+                                          transmat=np.array([[0.9, 0.1], [0.0, 1.0 - 5e-7]])), {})
+    assert gm.startprob_[1] == 5e-7
+
+
+def _brute_force_change_points(s, k):
+    """Labels of the least-squares split of s into k contiguous non-empty segments, by enumeration."""
+    from itertools import combinations
+
+    best = None
+    for cuts in combinations(range(1, len(s)), k - 1):
+        bounds = (0, *cuts, len(s))
+        cost = sum(((s[a:b] - s[a:b].mean(axis=0)) ** 2).sum() for a, b in zip(bounds[:-1], bounds[1:]))
+        if best is None or cost < best[0] - 1e-12:
+            best = (cost, np.repeat(np.arange(k), np.diff(bounds)))
+    return best[1]
+
+
+@pytest.mark.parametrize("seed, k", [(0, 1), (0, 2), (1, 3), (2, 4)])
+def test_change_points_are_the_least_squares_split(seed, k):
+    from drake_skill.reward.goal_model import _change_point_labels
+
+    rng = np.random.default_rng(seed)
+    s = np.repeat(rng.normal(size=(k, 2)) * 2, rng.integers(2, 5, size=k), axis=0) + rng.normal(0, 0.3, (1, 2))
+    s = s + rng.normal(0, 0.4, s.shape)
+    assert np.array_equal(_change_point_labels(s, k), _brute_force_change_points(s, k))
+
+
+def test_segmental_kmeans_is_a_fixed_point_of_the_left_to_right_alignment():
+    """Each demonstration's labels are the cheapest path 0 -> ... (stay or step one state on) against
+    the means of those labels, found here by enumerating every such path."""
+    from drake_skill.reward.goal_model import _segmental_kmeans
+
+    rng = np.random.default_rng(4)
+    k = 3
+    segs = [np.repeat([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]], n, axis=0) + rng.normal(0, 0.3, (3 * n, 2))
+            for n in (3, 4)]
+    start = [np.r_[0, 1, np.full(len(s) - 2, 2)] for s in segs]           # a poor first split
+    labels = _segmental_kmeans(segs, start, k)
+    X = np.concatenate(segs)
+    means = np.array([X[labels == j].mean(axis=0) for j in range(k)])
+    offset = 0
+    for s in segs:
+        n = len(s)
+        cost = ((s[:, None] - means[None]) ** 2).sum(axis=2)
+        paths = [np.r_[0, np.cumsum(steps)] for steps in np.ndindex(*[2] * (n - 1))]
+        paths = [p for p in paths if p.max() < k]
+        best = min(paths, key=lambda p: cost[np.arange(n), p].sum())
+        assert np.array_equal(labels[offset:offset + n], best)
+        offset += n
+    assert not np.array_equal(labels, np.concatenate(start))              # the rounds moved something
