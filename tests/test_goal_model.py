@@ -9,6 +9,7 @@ from pydrake.common.yaml import yaml_load_typed
 
 from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, load_npz
+from goal_model_support import two_state_model_arrays
 from scipy.special import logsumexp
 
 from drake_skill.reward.goal_model import (
@@ -385,16 +386,6 @@ def test_full_covariances_from_the_public_property(ct):
 
 
 # ----------------------------------------------------------- exact contracts
-def _small_model_arrays(k=2, d=2):
-    """A hand-written fitted model (no fit): arrays and metadata as :meth:`GoalHMM.to_arrays` gives them."""
-    arrays = {"startprob": np.array([1.0, 0.0]), "transmat": np.array([[0.9, 0.1], [0.0, 1.0]]),
-              "means": np.array([[0.0, 0.0], [1.0, 0.5]]),
-              "covars": np.array([[[0.04, 0.01], [0.01, 0.09]], [[0.01, 0.0], [0.0, 0.01]]]),
-              "terminal_states": np.array([1]), "lengths": np.array([20, 30]),
-              "loglik_per_step": np.array([-1.5, -1.2])}
-    return arrays, {"n_states": k, "n_features": d, "covariance_type": "full"}
-
-
 @pytest.mark.parametrize("call, message", [
     (lambda: check_sequences(np.zeros(5)), "X: expected a 2-D array (frames, features), got shape (5,)"),
     (lambda: check_sequences(np.zeros((0, 8))), "X: empty sequence (shape (0, 8)); expected at least one frame"),
@@ -477,7 +468,7 @@ def _multivariate_normal_logpdf(G, mean, cov):
 def test_inference_of_a_hand_written_model():
     """log_emission is the Gaussian log density; filtered, smoothed, score and decode agree with the
     recursions and with hmmlearn's public API on a model with a forbidden transition."""
-    arrays, meta = _small_model_arrays()
+    arrays, meta = two_state_model_arrays()
     gm = GoalHMM.from_arrays(arrays, meta)
     rng = np.random.default_rng(2)
     G = np.r_[rng.normal(0.0, 0.2, (6, 2)), rng.normal([1.0, 0.5], 0.1, (5, 2))]
@@ -499,7 +490,7 @@ def test_inference_of_a_hand_written_model():
 
 
 def test_samples_follow_the_model():
-    arrays, meta = _small_model_arrays()
+    arrays, meta = two_state_model_arrays()
     gm = GoalHMM.from_arrays(arrays, meta)
     G, states = gm.sample(400, random_state=3)
     again = gm.sample(400, random_state=3)
@@ -515,7 +506,7 @@ def test_samples_follow_the_model():
 
 
 def test_to_arrays_and_from_arrays_defaults():
-    arrays, meta = _small_model_arrays()
+    arrays, meta = two_state_model_arrays()
     gm = GoalHMM.from_arrays(arrays, {})
     assert (gm.n_states_, gm.n_features_in_, gm.covariance_type_, gm.restart_, gm.converged_, gm.n_iter_) == (
         2, 2, "full", 0, True, 0)
@@ -537,7 +528,7 @@ def test_to_arrays_and_from_arrays_defaults():
 
 
 def _arrays_with(**changes):
-    arrays, _ = _small_model_arrays()
+    arrays, _ = two_state_model_arrays()
     return {**arrays, **changes}
 
 

@@ -11,7 +11,9 @@ from drake_skill.bench import reward as bench_reward
 from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, load_npz
 from drake_skill.reward.mrp import exact_values
-from drake_skill.reward.pomrp import Pomrp, PomrpConfig, VerdictConfig, fit_pomrp
+from drake_skill.reward.goal_model import GoalHMM, forward_backward
+from drake_skill.reward.pomrp import OffModelConfig, Pomrp, PomrpConfig, VerdictConfig, fit_pomrp
+from goal_model_support import two_state_model_arrays
 
 TRUE = left_to_right_model(n_states=4, seed=0)
 
@@ -179,8 +181,7 @@ def test_bench_reward_json(capsys):
 
 
 # ------------------------------------------------- issue 12: finite, robust rewards
-from drake_skill.reward.goal_model import GoalHMM, _backward_log, forward_log  # noqa: E402
-from drake_skill.reward.pomrp import OffModelConfig  # noqa: E402
+from drake_skill.reward.goal_model import _backward_log, forward_log  # noqa: E402
 
 
 def _strict_chain_pomrp():
@@ -448,3 +449,135 @@ def test_off_model_range_is_each_demonstration_against_the_others(pomrp):
     l_loo = np.concatenate(l_loo)
     q = pomrp.off_model_config.quantile
     assert pomrp.frame_loglik_range == pytest.approx((np.quantile(l_loo, q), l_loo.max()), rel=1e-9, abs=1e-9)
+
+
+# ----------------------------------------------------------- a hand-written model: exact contracts
+_S = np.array([[0.02, 0.002], [0.002, 0.02]])               # the demonstrations' frame covariance
+_REFS = np.array([[0.0, 0.0], [0.5, 0.2], [1.0, 0.5]])       # their frames
+
+
+def _two_state(**kwargs):
+    arrays, meta = two_state_model_arrays()
+    return Pomrp(GoalHMM.from_arrays(arrays, meta), kwargs.pop("values", [0.2, 1.0]), **kwargs)
+
+
+def _guarded(**kwargs):
+    return _two_state(frame_loglik_range=kwargs.pop("frame_loglik_range", (-3.0, -1.0)), data_covar=_S,
+                      references=_REFS, **kwargs)
+
+
+_REQUIRED = ("frame_loglik_range, data_covar, references: required with off_model.enabled (the demonstrations' "
+             "l range, frame covariance and frames, recorded by fit_pomrp); refit, or pass "
+             "OffModelConfig(enabled=False) for the thesis's plain rewards")
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"values": [1.0]}, "values: expected 2 finite state values, got shape (1,): [1.]"),
+    ({"values": [1.0, np.nan]}, "values: expected 2 finite state values, got shape (2,): [ 1. nan]"),
+    ({"verdict": VerdictConfig(loglik_margin=-1.0)}, "verdict.loglik_margin: expected >= 0, got -1.0"),
+    ({"verdict": VerdictConfig(loglik_margin=np.nan)}, "verdict.loglik_margin: expected >= 0, got nan"),
+    ({"off_model": OffModelConfig(enabled=False, margin=np.inf)},
+     "off_model.margin: expected a finite value >= 0 nats, got inf"),
+    ({"off_model": OffModelConfig(enabled=False, margin=-0.5)},
+     "off_model.margin: expected a finite value >= 0 nats, got -0.5"),
+    ({"frame_loglik_range": [1.0]}, "frame_loglik_range: expected finite (min, max) nats, got [1.]"),
+    ({"frame_loglik_range": [0.0, np.inf]}, "frame_loglik_range: expected finite (min, max) nats, got [ 0. inf]"),
+    ({"frame_loglik_range": [2.0, 1.0]}, "frame_loglik_range: expected finite (min, max) nats, got [2. 1.]"),
+    ({"frame_loglik_range": [1.0, 2.0]}, _REQUIRED),
+    ({"frame_loglik_range": [1.0, 2.0], "data_covar": _S}, _REQUIRED),
+    ({"frame_loglik_range": [1.0, 2.0], "references": _REFS}, _REQUIRED),
+    ({"off_model": OffModelConfig(), "data_covar": _S, "references": _REFS}, _REQUIRED),
+    ({"data_covar": np.eye(3)}, "data_covar: expected a finite symmetric (2, 2) covariance, got shape (3, 3)"),
+    ({"data_covar": [[1.0, 0.5], [0.0, 1.0]]}, "data_covar: expected a finite symmetric (2, 2) covariance, "
+                                               "got shape (2, 2)"),
+    ({"data_covar": [[1.0, np.nan], [np.nan, 1.0]]}, "data_covar: expected a finite symmetric (2, 2) covariance, "
+                                                     "got shape (2, 2)"),
+    ({"data_covar": [[1.0, 2.0], [2.0, 1.0]]}, "data_covar: not positive definite"),
+    ({"references": np.zeros(2)}, "references: expected finite demonstration frames (N, 2), got shape (2,)"),
+    ({"references": np.zeros((3, 3))}, "references: expected finite demonstration frames (N, 2), got shape (3, 3)"),
+    ({"references": np.zeros((0, 2))}, "references: expected finite demonstration frames (N, 2), got shape (0, 2)"),
+    ({"references": [[0.0, np.nan]]}, "references: expected finite demonstration frames (N, 2), got shape (1, 2)"),
+])
+def test_each_bad_pomrp_argument_is_named_in_full(kwargs, message):
+    with pytest.raises(ValueError) as info:
+        _two_state(**kwargs)
+    assert str(info.value) == message
+
+
+def test_pomrp_arguments_at_their_edges():
+    """Zero margins and a one-point range are valid; the guard defaults to on exactly when the
+    demonstrations' range is given; an unfitted goal model is refused."""
+    edge = _guarded(frame_loglik_range=(-2.0, -2.0), verdict=VerdictConfig(loglik_margin=0.0),
+                    off_model=OffModelConfig(margin=0.0))
+    assert edge.frame_loglik_range == (-2.0, -2.0) and edge.explained_floor == -2.0
+    assert edge.loglik_range == (-1.5, -1.2)
+    assert _guarded().off_model_config.enabled and not _two_state().off_model_config.enabled
+    assert _two_state().explained_floor == -np.inf
+    assert _guarded(off_model=OffModelConfig(margin=3.0)).explained_floor == -6.0
+    assert _two_state(info={"mrp": 1}).info == {"mrp": 1} and _two_state().info == {}
+    with pytest.raises(RuntimeError, match="not fitted"):
+        Pomrp(GoalHMM(), [0.0, 1.0])
+    with pytest.raises(ValueError) as info:
+        _two_state().frame_loglik(np.zeros((1, 2)))
+    assert str(info.value) == ("frame_loglik: this reward has no data_covar/references (saved before the "
+                               "off-model guard)")
+
+
+def test_hand_written_rewards_weights_and_verdicts():
+    """Eq. 4.4 times w_t, Eq. 4.5, the filtered reward and every verdict ingredient, by hand."""
+    pomrp = _guarded(frame_loglik_range=(1.0, 2.0), off_model=OffModelConfig(margin=1.0))   # floor 0 nats
+    gm = pomrp.goal_model
+    rng = np.random.default_rng(1)
+    # Near the references, then a last frame in the terminal state but 30 cm (2 std of S) from them.
+    G = np.r_[rng.normal(0.0, 0.05, (5, 2)), rng.normal([1.0, 0.5], 0.05, (4, 2)), [[1.3, 0.5]]]
+    inv, logdet = np.linalg.inv(_S), np.linalg.slogdet(_S)[1]
+    log_norm = -0.5 * (2 * np.log(2 * np.pi) + logdet)
+    ell = np.array([max(-0.5 * (g - x) @ inv @ (g - x) for x in _REFS) for g in G]) + log_norm
+    np.testing.assert_allclose(pomrp.frame_loglik(G), ell, rtol=1e-12)
+    assert pomrp.frame_loglik(_REFS[1:2])[0] == pytest.approx(log_norm, abs=1e-12)   # on a reference: the peak
+    w = np.minimum(1.0, np.exp(ell - 0.0))
+    assert w[:-1].min() == 1.0 and w[-1] < 0.9
+    np.testing.assert_allclose(pomrp.explained_weights(G), w, rtol=1e-12)
+    filtered, smoothed, ll = forward_backward(gm.log_emission(G), gm.startprob_, gm.transmat_)
+    h, R = pomrp.reward_and_return(G)
+    np.testing.assert_allclose(h, smoothed @ [0.2, 1.0] * w, rtol=1e-12)
+    assert R == pytest.approx(h.sum(), rel=1e-15)
+    np.testing.assert_array_equal(pomrp.rewards(G), h)
+    assert pomrp.episode_return(G) == R
+    np.testing.assert_allclose(pomrp.filtered_rewards(G), filtered @ [0.2, 1.0] * w, rtol=1e-12)
+    d = pomrp.verdict_details(G)
+    assert ll / 10 > 0.8                                       # above [-1.5 - 2, -1.2 + 2]: tighter than the demos
+    assert d == {"final_state": 1, "terminal": True, "loglik_per_step": pytest.approx(ll / 10, rel=1e-12),
+                 "loglik_in_range": False, "final_frame_loglik": pytest.approx(ell[-1], rel=1e-12),
+                 "final_frame_explained": False, "success": False}
+    assert pomrp.verdict(G) is False
+    # The plain form: no weights, no final-frame rule, the final frame's l not computed.
+    plain = _two_state()
+    np.testing.assert_array_equal(plain.explained_weights(G), np.ones(10))
+    np.testing.assert_allclose(plain.rewards(G), smoothed @ [0.2, 1.0], rtol=1e-12)
+    d = plain.verdict_details(G)
+    assert np.isnan(d["final_frame_loglik"]) and d["final_frame_explained"] and d["success"] is True
+    # Still in state 0 at the end: not terminal.
+    assert not plain.verdict_details(G[:5])["terminal"] and plain.verdict_details(G[:5])["final_state"] == 0
+    with pytest.raises(ValueError) as info:
+        plain.rewards(np.zeros((5, 3)))
+    assert str(info.value) == "G: expected 2 features per frame, got shape (5, 3)"
+
+
+def test_verdict_bounds_are_inclusive():
+    """A per-frame log-likelihood exactly at the demonstrations' min (margin 0) is in range, and a
+    final frame exactly at the floor (margin 0) is explained."""
+    rng = np.random.default_rng(2)
+    G = np.r_[rng.normal(0.0, 0.1, (5, 2)), rng.normal([1.0, 0.5], 0.05, (4, 2))]
+    per_step = _two_state().verdict_details(G)["loglik_per_step"]
+    arrays, meta = two_state_model_arrays()
+    for ends in ([per_step, per_step + 1.0], [per_step - 1.0, per_step]):
+        gm = GoalHMM.from_arrays({**arrays, "loglik_per_step": np.array(ends)}, meta)
+        strict = Pomrp(gm, [0.2, 1.0], VerdictConfig(require_likelihood=True, loglik_margin=0.0))
+        d = strict.verdict_details(G)
+        assert d["loglik_in_range"] and d["success"]
+    l_T = float(_guarded().frame_loglik(G[-1:])[0])
+    at_floor = _guarded(frame_loglik_range=(l_T, l_T + 1.0), off_model=OffModelConfig(margin=0.0))
+    assert at_floor.verdict_details(G)["final_frame_explained"]
+    above = _guarded(frame_loglik_range=(np.nextafter(l_T, np.inf), l_T + 1.0), off_model=OffModelConfig(margin=0.0))
+    assert not above.verdict_details(G)["final_frame_explained"]
