@@ -636,3 +636,150 @@ def test_segmental_kmeans_is_a_fixed_point_of_the_left_to_right_alignment():
         assert np.array_equal(labels[offset:offset + n], best)
         offset += n
     assert not np.array_equal(labels, np.concatenate(start))              # the rounds moved something
+
+
+# ----------------------------------------------------------- what fit keeps, and its rules
+def test_fitted_attributes_are_those_of_the_winning_run(fitted4):
+    _, X, lengths, gm = fitted4
+    ends = np.cumsum(lengths)
+    demos = [X[e - n:e] for e, n in zip(ends, lengths)]
+    np.testing.assert_allclose(gm.loglik_per_step_, [gm.score(G) / len(G) for G in demos], rtol=1e-12)
+    assert gm.log_likelihood_ == pytest.approx(gm.score(X, lengths), rel=1e-12)
+    assert gm.terminal_states_.tolist() == sorted({int(gm.decode(G)[-1]) for G in demos})
+    assert gm.lengths_.tolist() == list(lengths) and gm.n_features_in_ == 8
+    row = next(r for r in gm.criterion_table_ if (r["k"], r["covariance_type"]) == (gm.n_states_, gm.covariance_type_))
+    assert (row["restart"], row["converged"], row["n_iter"], row["status"]) == (
+        gm.restart_, gm.converged_, gm.n_iter_, "ok")
+    assert row["log_likelihood"] == pytest.approx(gm.log_likelihood_, rel=1e-9)
+    assert [(r["k"], r["covariance_type"]) for r in gm.criterion_table_] == [
+        (k, ct) for k in range(2, 9) for ct in ("diag", "full")]
+    ok = [r for r in gm.criterion_table_ if r["status"] == "ok"]
+    assert row["aic"] == min(r["aic"] for r in ok)
+    json.dumps(gm.criterion_table_)
+
+
+def _run_of(history, n_iter=100, tol=1e-3, transmat=((0.9, 0.1), (0.0, 1.0)), startprob=(1.0, 0.0),
+            covariance_type="full", covars=None):
+    """``GoalHMM._validate_run`` of a real hmmlearn model with the given parameters and monitor history."""
+    arrays, _ = two_state_model_arrays()
+    model = GaussianHMM(n_components=2, covariance_type=covariance_type, init_params="")
+    model.n_features = 2
+    model.startprob_, model.transmat_ = np.array(startprob), np.array(transmat)
+    model.means_ = arrays["means"]
+    model.covars_ = arrays["covars"] if covars is None else covars
+    model.monitor_.history.extend(history)
+    rng = np.random.default_rng(0)
+    X = np.r_[rng.normal(0.0, 0.1, (6, 2)), rng.normal([1.0, 0.5], 0.05, (6, 2))]
+    return GoalHMM(n_iter=n_iter, tol=tol)._validate_run(model, X, np.array([12]), 3), X
+
+
+@pytest.mark.parametrize("history, n_iter, converged", [
+    ([-10.0, -9.0, -8.9995], 100, True),              # stopped on the tolerance
+    ([-10.0, -9.0], 100, False),                      # last gain 1 >= tol: not by the tolerance
+    ([-10.0], 100, False),                            # one iteration tells nothing
+    ([-10.0, -9.0, -8.9995], 3, False),               # the budget ran out (hmmlearn says converged)
+    ([-10.0, -9.0, -9.5, -9.4999], 100, False),       # a real likelihood drop
+    ([-1000.0, -999.0, -999.000001, -999.0000005], 100, True),   # a drop of 1e-6 nats: rounding at 1e3
+])
+def test_convergence_rule_on_the_monitor_history(history, n_iter, converged):
+    run, _ = _run_of(history, n_iter=n_iter)
+    assert run["converged"] is converged and run["n_iter"] == len(history) and run["restart"] == 3
+
+
+def test_validated_run_repairs_and_measures():
+    """A state without frames (an all-zero transition row) becomes absorbing, the start vector is
+    renormalised; the log-likelihood is the forward pass's; occupancy is the smoothed posteriors' sum."""
+    run, X = _run_of([-10.0, -9.0, -8.9995], transmat=((0.9, 0.1), (0.0, 0.0)), startprob=(2.0, 0.0))
+    np.testing.assert_array_equal(run["transmat"], [[0.9, 0.1], [0.0, 1.0]])
+    np.testing.assert_array_equal(run["startprob"], [1.0, 0.0])
+    arrays, meta = two_state_model_arrays()
+    gm = GoalHMM.from_arrays(arrays, meta)
+    assert run["log_likelihood"] == pytest.approx(gm.score(X), rel=1e-12)
+    assert run["min_occupancy"] == pytest.approx(gm.predict_proba(X).sum(axis=0).min(), rel=1e-12)
+    assert 5.0 < run["min_occupancy"] < 7.0 and not run["degenerate"]        # 6 frames each: >= d + 1 = 3
+    np.testing.assert_array_equal(run["covars"], arrays["covars"])
+
+
+@pytest.mark.parametrize("covariance_type, covars, degenerate", [
+    ("full", None, False),
+    ("diag", np.array([[0.04, 0.09], [0.01, 0.01]]), False),
+    ("spherical", np.array([0.05, 0.01]), False),
+    ("tied", np.array([[0.04, 0.0], [0.0, 0.04]]), False),
+])
+def test_occupancy_needed_per_covariance_type(covariance_type, covars, degenerate):
+    run, _ = _run_of([-10.0, -9.0, -8.9995], covariance_type=covariance_type, covars=covars)
+    assert run["degenerate"] is degenerate
+
+
+def test_a_state_explaining_two_frames_is_degenerate_for_a_full_covariance_only():
+    """Occupancy 2 frames: a variance (diag) can be estimated, a 2-D full covariance needs d + 1 = 3."""
+    arrays, _ = two_state_model_arrays()
+    for ct, covars, expected in (("full", arrays["covars"], True), ("diag", np.array([[0.04, 0.09], [0.01, 0.01]]),
+                                                                      False)):
+        model = GaussianHMM(n_components=2, covariance_type=ct, init_params="")
+        model.n_features = 2
+        model.startprob_, model.transmat_ = np.array([1.0, 0.0]), np.array([[0.9, 0.1], [0.0, 1.0]])
+        model.means_, model.covars_ = arrays["means"], covars
+        model.monitor_.history.extend([-10.0, -9.0, -8.9995])
+        rng = np.random.default_rng(0)
+        X = np.r_[rng.normal(0.0, 0.05, (2, 2)), rng.normal([1.0, 0.5], 0.05, (10, 2))]
+        run = GoalHMM()._validate_run(model, X, np.array([12]), 0)
+        assert run["min_occupancy"] == pytest.approx(2.0, abs=1e-3) and run["degenerate"] is expected
+
+
+def test_unusable_runs_are_dropped():
+    assert _run_of([-1.0, -0.5], transmat=((np.nan, 1.0), (0.0, 1.0)))[0] is None
+    assert _run_of([-1.0, -0.5], startprob=(np.inf, 0.0))[0] is None
+
+
+@pytest.mark.parametrize("k", [1, 3])
+def test_first_initialisation_is_left_to_right(k):
+    """Restart 0: change points refined by segmental k-means; start on state 0 (leak 0.02 spread over
+    the others), stay probabilities from the mean segment duration, clipped to [0.5, 0.98], the leak
+    spread evenly; means of each label; covariances pulled toward the global diagonal by d + 2 frames."""
+    from drake_skill.reward.goal_model import _change_point_labels, _segmental_kmeans
+
+    _, X, lengths = _data(3, 2, [30, 40])
+    gm = GoalHMM(n_restarts=1)
+    eps = 1e-3
+    r, start, trans, means, covs = next(gm._inits(X, np.array(lengths), k, 1, eps))
+    segs = [X[:30], X[30:]]
+    lab = _segmental_kmeans(segs, [_change_point_labels(s, k) for s in segs], k)
+    np.testing.assert_allclose(means, [X[lab == j].mean(axis=0) for j in range(k)], rtol=1e-12)
+    assert r == 0
+    if k == 1:
+        assert start.tolist() == [1.0] and trans.tolist() == [[1.0]]
+        return
+    np.testing.assert_allclose(start, [0.98, 0.01, 0.01], rtol=1e-12)
+    n = np.bincount(lab, minlength=k)
+    stay = np.clip(1.0 - 2.0 / n, 0.5, 0.98)                       # duration = frames per demonstration
+    expected = np.full((k, k), 0.01)
+    for j in range(k - 1):
+        expected[j, j], expected[j, j + 1] = stay[j] * 0.98, (1 - stay[j]) * 0.98
+    expected[-1, -1] = 0.98
+    np.testing.assert_allclose(trans, expected / expected.sum(axis=1, keepdims=True), rtol=1e-12)
+    d = X.shape[1]
+    glob = np.diag(X.var(axis=0) + eps)
+    j = 1
+    S = np.cov(X[lab == j].T, bias=True)
+    np.testing.assert_allclose(covs[j], (n[j] * S + (d + 2.0) * glob / k) / (n[j] + d + 2.0) + eps * np.eye(d),
+                               rtol=1e-12)
+
+
+def test_later_initialisations_are_seeded_and_time_ordered():
+    """Odd restarts: k-means clusters relabelled by mean relative time; even ones: random time cuts.
+    Each restart draws from its own seed (random_state, k, covariance type, restart)."""
+    _, X, lengths = _data(3, 2, [30, 40])
+    inits = list(GoalHMM(n_restarts=4, random_state=5)._inits(X, np.array(lengths), 3, 1, 1e-3))
+    assert [i[0] for i in inits] == [0, 1, 2, 3]
+    again = list(GoalHMM(n_restarts=4, random_state=5)._inits(X, np.array(lengths), 3, 1, 1e-3))
+    other = list(GoalHMM(n_restarts=4, random_state=6)._inits(X, np.array(lengths), 3, 1, 1e-3))
+    for a, b in zip(inits, again):
+        np.testing.assert_array_equal(a[3], b[3])
+    assert any(not np.array_equal(a[3], b[3]) for a, b in zip(inits[1:], other[1:]))
+    rel_t = np.r_[np.linspace(0, 1, 30), np.linspace(0, 1, 40)]
+    for _, _, _, means, _ in inits:
+        # The state means are ordered in time: the frames nearest each mean come later for later states.
+        nearest = np.argmin(((X[:, None] - means[None]) ** 2).sum(axis=2), axis=1)
+        order = [rel_t[nearest == j].mean() for j in range(3)]
+        assert order == sorted(order)
