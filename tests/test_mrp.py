@@ -161,3 +161,27 @@ def test_parameter_bounds_are_inclusive():
     assert exact_values(PI, P, [3], L, gamma=1.0)[0] > exact_values(PI, P, [3], L, gamma=0.9)[0]
     with pytest.raises(ValueError, match=r"terminal_scale: expected c > 0 .* got 0"):
         exact_values(PI, P, [3], L, terminal_scale=0)
+
+
+def test_monte_carlo_values_by_hand():
+    """Eqs. 4.1-4.3 written as loops over the sampled sequences: per state, the mean return of its
+    visits, 0 for a state never visited, the terminal states' values times c."""
+    pi5 = np.r_[PI, 0.0]
+    P5 = np.zeros((5, 5))
+    P5[:4, :4], P5[4, 4] = P, 1.0                                 # state 4 is never reached
+    S = sample_state_sequences(pi5, P5, 7, 12, 3)
+    gamma, scale = 0.8, 1.5
+    sums, counts = np.zeros(5), np.zeros(5)
+    for seq in S:
+        for t, s in enumerate(seq):
+            sums[s] += sum(gamma ** (j - t) * (seq[j] in TERMINAL) for j in range(t, len(seq)))
+            counts[s] += 1
+    expected = np.divide(sums, counts, out=np.zeros(5), where=counts > 0)
+    expected[TERMINAL] *= scale
+    v = monte_carlo_values(pi5, P5, TERMINAL, 12, n_sequences=7, gamma=gamma, terminal_scale=scale, random_state=3)
+    np.testing.assert_allclose(v, expected, rtol=1e-12)
+    assert v[4] == 0.0 and counts[4] == 0
+    # The defaults: 100 sequences, gamma 0.9, c = 2, seed 0.
+    np.testing.assert_array_equal(monte_carlo_values(PI, P, TERMINAL, L),
+                                  monte_carlo_values(PI, P, TERMINAL, L, n_sequences=100, gamma=0.9,
+                                                     terminal_scale=2.0, random_state=0))
