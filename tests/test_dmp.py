@@ -611,3 +611,47 @@ def test_smallest_valid_dmp_inputs():
     assert Dmp(np.zeros((2, 7)), Y0, GOAL, 1.0).n_basis == 2 and Dmp(_W5, Y0, GOAL, 3600.0).tau == 3600.0
     cov = exploration_covariance([_W5, _W5 + 1.0], ridge=0.0)
     np.testing.assert_allclose(cov[0], 0.5 * np.ones((7, 7)) + 1e-8 * np.eye(7), rtol=1e-12)
+
+
+def test_forcing_target_derivatives_are_second_order_at_the_ends():
+    """Eq. 3.7's target from np.gradient with second-order ends: exact for a quadratic path, also on
+    uneven times and at the first and last samples (first-order ends err there by ~h)."""
+    from drake_skill.action.dmp import _f_target
+
+    t = np.array([0.0, 0.05, 0.15, 0.2, 0.35, 0.5, 0.55, 0.7])
+    y = np.c_[3.0 * t**2 - t + 0.5, -2.0 * t**2]
+    goal, tau, cfg = np.array([1.0, -0.5]), 0.7, DmpConfig()
+    dy = np.c_[6.0 * t - 1.0, -4.0 * t]
+    ddy = np.tile([6.0, -4.0], (len(t), 1))
+    expected = tau * tau * ddy - cfg.K * (goal - y) + cfg.D * tau * dy
+    np.testing.assert_allclose(_f_target(t, y, goal, tau, cfg), expected, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("regression", ["lwr", "least_squares"])
+def test_weights_of_the_scaled_form_do_not_depend_on_the_amplitude(regression):
+    """Thesis Eq. 3.4 (scale_by_amplitude): f = (g - y0) w . phi, so a demonstration twice as large,
+    start and goal included, has the same weights, in both regressions."""
+    t = np.linspace(0.0, 1.0, 50)
+    path = np.c_[0.2 + np.sin(2 * t) / np.sin(2), -0.3 + 0.5 * t**2]          # amplitudes 1 and 0.5
+    cfg = DmpConfig(n_basis=8, regression=regression, scale_by_amplitude=True)
+    w = fit_weights(t, path, cfg)
+    np.testing.assert_allclose(fit_weights(t, 2.0 * path, cfg), w, rtol=1e-9, atol=1e-9 * np.abs(w).max())
+    assert np.abs(w).max() > 10.0
+
+
+def test_as_many_bases_as_samples_and_a_basis_without_samples():
+    t = np.linspace(0.0, 1.0, 12)
+    y = np.c_[np.sin(t), np.cos(t)]
+    assert fit_weights(t, y, DmpConfig(n_basis=12)).shape == (12, 2)
+    with pytest.raises(ValueError) as info:
+        fit_weights(t, y, DmpConfig(n_basis=13))
+    assert str(info.value) == ("DmpConfig.n_basis: 13 bases but the demonstration has only 12 samples; "
+                               "use at most 12 bases or a longer demonstration")
+    # Per-basis LWR with very narrow bases and samples only at the two ends: the middle bases see none.
+    gap = np.r_[np.linspace(0.0, 0.05, 20), np.linspace(0.95, 1.0, 20)]
+    narrow = DmpConfig(n_basis=10, regression="lwr", width_scale=200.0)
+    with pytest.raises(ValueError) as info:
+        fit_weights(gap, np.c_[gap, gap**2], narrow)
+    assert str(info.value) == "demonstration: basis 2 (centre x=0.359) receives no samples; use fewer bases"
+    assert np.all(np.isfinite(fit_weights(np.linspace(0.0, 1.0, 40), np.c_[t[:1].repeat(40), np.linspace(0, 1, 40)],
+                                          narrow)))
