@@ -655,3 +655,47 @@ def test_as_many_bases_as_samples_and_a_basis_without_samples():
     assert str(info.value) == "demonstration: basis 2 (centre x=0.359) receives no samples; use fewer bases"
     assert np.all(np.isfinite(fit_weights(np.linspace(0.0, 1.0, 40), np.c_[t[:1].repeat(40), np.linspace(0, 1, 40)],
                                           narrow)))
+
+
+def _demo(columns, q=(1.0, 0.0, 0.0, 0.0)):
+    """20 samples over 2 s: xyz from ``columns`` (3 arrays) and a constant quaternion ``q``."""
+    t = np.linspace(0.0, 2.0, 20)
+    return t, np.c_[np.column_stack(columns), np.tile(q, (20, 1))]
+
+
+def test_scaled_columns_are_those_every_demonstration_moves_at_least_the_threshold():
+    """x moves exactly 5 cm in both (scaled: "at least"), y 6 cm in one and 4.9 cm in the other (not
+    scaled), z jumps 10 cm on the first step of one and the last step of the other (scaled: the
+    amplitude is the last sample minus the first); the constant quaternion is not scaled."""
+    ramp = np.linspace(0.0, 1.0, 20)
+    first_step, last_step = np.r_[0.0, np.full(19, 0.1)], np.r_[np.zeros(19), 0.1]
+    demos = [_demo([0.05 * ramp, 0.06 * ramp, first_step]), _demo([0.05 * ramp, 0.049 * ramp, last_step])]
+    fit = fit_demonstrations(demos, DmpConfig(n_basis=5))
+    assert fit.config.scaled_dims == [0, 2]
+    assert all(dmp.weights.shape == (5, 7) for dmp in fit.dmps)
+    given = DmpConfig(n_basis=5, scale_threshold=0.0, scaled_dims=[1])                  # threshold 0: as given
+    assert fit_demonstrations(demos, given).config.scaled_dims == [1]
+    assert fit_demonstrations(demos, DmpConfig(n_basis=5, scale_by_amplitude=True)).config.scaled_dims == []
+    # A threshold below the amplitude floor: still only what moves (the floor is not applied here).
+    assert fit_demonstrations(demos, DmpConfig(n_basis=5, scale_threshold=0.005)).config.scaled_dims == [0, 1, 2]
+    # Ude rotations: 6 columns, the rotation vector's z (column 5) moves 0.4 rad in both.
+    turn = [np.c_[np.cos(a / 2), 0 * a, 0 * a, np.sin(a / 2)] for a in (0.4 * ramp,)][0]
+    ude = [(t, np.c_[p[:, :3], turn]) for t, p in demos]
+    assert fit_demonstrations(ude, DmpConfig(n_basis=5, quaternion="ude")).config.scaled_dims == [0, 2, 5]
+    # The same turn as a vector quaternion: only its z component moves 5 cm or more (sin 0.2 = 0.199).
+    assert fit_demonstrations(ude, DmpConfig(n_basis=5)).config.scaled_dims == [0, 2, 6]
+
+
+@pytest.mark.parametrize("first_sign", [1.0, -1.0])
+def test_every_demonstration_is_put_on_the_first_ones_hemisphere(first_sign):
+    """The same path with its quaternions negated (the same rotations) fits the same DMP, on the
+    hemisphere of the first demonstration's first quaternion, whichever sign that has."""
+    q = np.array([np.cos(0.2), 0.0, 0.0, np.sin(0.2)])
+    path = [0.1 * np.linspace(0.0, 1.0, 20), np.zeros(20), 0.2 * np.linspace(0.0, 1.0, 20) ** 2]
+    demos = [_demo(path, first_sign * q), _demo(path, -first_sign * q)]
+    for quaternion in ("vector", "ude"):
+        fit = fit_demonstrations(demos, DmpConfig(n_basis=5, quaternion=quaternion))
+        for dmp in fit.dmps:
+            np.testing.assert_allclose(dmp.y0[3:], first_sign * q, atol=1e-12)
+            np.testing.assert_allclose(dmp.goal[3:], first_sign * q, atol=1e-12)
+        np.testing.assert_allclose(fit.dmps[1].weights, fit.dmps[0].weights, atol=1e-9)

@@ -560,7 +560,7 @@ def fit_demonstrations(
             for _, p in checked_demos])
         dims = [int(i) for i in np.flatnonzero(np.all(amplitudes >= config.scale_threshold, axis=0))]
         config = dataclasses.replace(config, scaled_dims=dims).validate()
-    dmps = [fit_dmp(t, p, config, quaternion_reference=reference) for t, p in checked_demos]
+    dmps = [fit_dmp(t, p, config) for t, p in checked_demos]   # quaternions already on the reference's side
     index, _ = initial_weights(dmps, seed)
     return DemonstrationFit(dmps=dmps, initial_index=index, sigma0=exploration_covariance(dmps, ridge, floor),
                             ridge=ridge, config=config)
