@@ -1,6 +1,7 @@
 """Goal HMM: state-count selection, robustness of Baum-Welch, inference vs hmmlearn."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -535,8 +536,9 @@ def _arrays_with(**changes):
 @pytest.mark.parametrize("arrays, metadata, message", [
     ({k: v for k, v in _arrays_with().items() if k not in ("means", "lengths")}, {},
      "missing array(s) ['hmm/means', 'hmm/lengths']"),
-    (_arrays_with(), {"params": {"bogus": 1}},
-     "goal-model metadata 'params': GoalHMM.__init__() got an unexpected keyword argument 'bogus'"),
+    (_arrays_with(), {"params": {"bogus": 1}},      # Python's own words, whatever it calls the constructor
+     re.compile(r"goal-model metadata 'params': GoalHMM\.\S*__init__\S*\(\) "
+                r"got an unexpected keyword argument 'bogus'")),
     (_arrays_with(means=np.array([["a", "b"], ["c", "d"]])), {}, "hmm/means: dtype <U1, expected numbers"),
     (_arrays_with(means=np.zeros(2)), {}, "hmm/means: shape (2,), expected (k, d) with k, d >= 1"),
     (_arrays_with(means=np.zeros((0, 2))), {}, "hmm/means: shape (0, 2), expected (k, d) with k, d >= 1"),
@@ -581,7 +583,10 @@ def _arrays_with(**changes):
 def test_each_bad_saved_goal_model_is_named_in_full(arrays, metadata, message):
     with pytest.raises(ValueError) as info:
         GoalHMM.from_arrays(arrays, metadata, prefix="hmm/")
-    assert str(info.value) == message
+    if isinstance(message, re.Pattern):
+        assert message.fullmatch(str(info.value)), str(info.value)
+    else:
+        assert str(info.value) == message
 
 
 def test_saved_probabilities_within_the_tolerance_load():
