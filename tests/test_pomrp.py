@@ -1,6 +1,7 @@
 """POMRP rewards (thesis Eqs. 4.4, 4.5), filtered reward, streaming filter and verdict."""
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -517,10 +518,15 @@ def test_pomrp_arguments_at_their_edges():
     assert _two_state(info={"mrp": 1}).info == {"mrp": 1} and _two_state().info == {}
     with pytest.raises(RuntimeError, match="not fitted"):
         Pomrp(GoalHMM(), [0.0, 1.0])
-    with pytest.raises(ValueError) as info:
-        _two_state().frame_loglik(np.zeros((1, 2)))
-    assert str(info.value) == ("frame_loglik: this reward has no data_covar/references (saved before the "
-                               "off-model guard)")
+    message = "frame_loglik: this reward has no data_covar/references (saved before the off-model guard)"
+    for partial in ({}, {"data_covar": _S}, {"references": _REFS}):
+        with pytest.raises(ValueError) as info:
+            _two_state(**partial).frame_loglik(np.zeros((1, 2)))
+        assert str(info.value) == message
+    # Zero start and transition probabilities (log 0 = -inf) are taken without a warning.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert _two_state()._log_transmat[1, 0] == -np.inf
 
 
 def test_hand_written_rewards_weights_and_verdicts():
