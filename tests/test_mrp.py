@@ -185,3 +185,12 @@ def test_monte_carlo_values_by_hand():
     np.testing.assert_array_equal(monte_carlo_values(PI, P, TERMINAL, L),
                                   monte_carlo_values(PI, P, TERMINAL, L, n_sequences=100, gamma=0.9,
                                                      terminal_scale=2.0, random_state=0))
+
+
+def test_a_state_visited_once_has_that_visit_s_return():
+    """A deterministic chain 0 -> 1 -> 2 (terminal, absorbing) over 5 frames: states 0 and 1 are each
+    visited once, so their values are those visits' returns (not the 0 of a never-visited state)."""
+    P3 = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    v = monte_carlo_values([1.0, 0.0, 0.0], P3, [2], 5, n_sequences=1, gamma=0.5, terminal_scale=1.0)
+    # Returns along [0, 1, 2, 2, 2] with r = [0, 0, 1, 1, 1]: G_3..5 = 1.75, 1.5, 1; G_2 = 0.875; G_1 = 0.4375.
+    np.testing.assert_allclose(v, [0.4375, 0.875, (1.75 + 1.5 + 1.0) / 3], rtol=1e-12)
