@@ -2,6 +2,7 @@
 
 import json
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -200,6 +201,13 @@ def test_forward_backward_brute_force():
         np.testing.assert_allclose(filtered[t], f / f.sum())
     path, lp = viterbi(log_b, pi, P)
     assert np.array_equal(path, paths[np.argmax(w)]) and np.isclose(lp, np.log(w.max()))
+    # The plain reference recursion: log alpha_t(s) = log P(g_1..g_t, s_t = s), and log P(G).
+    la, ll_ref = forward_log(log_b, np.log(pi), np.log(P))
+    assert np.isclose(ll_ref, np.log(w.sum()))
+    for t in range(T):
+        wt = pi[paths[:, 0]] * np.prod(P[paths[:, :t], paths[:, 1:t + 1]], axis=1) * np.exp(
+            log_b[np.arange(t + 1), paths[:, :t + 1]].sum(1))
+        np.testing.assert_allclose(np.exp(la[t]), np.bincount(paths[:, t], weights=wt, minlength=k) / k ** (T - t - 1))
 
 
 def test_save_load_round_trip(tmp_path, fitted4):
@@ -210,6 +218,8 @@ def test_save_load_round_trip(tmp_path, fitted4):
     back = GoalHMM.from_arrays(load_npz(tmp_path / "hmm.npz"), json.loads((tmp_path / "hmm.json").read_text()))
     assert back.n_states_ == gm.n_states_ and back.covariance_type_ == gm.covariance_type_
     assert back.restart_ == gm.restart_ and back.get_params() == gm.get_params()
+    assert (back.converged_, back.n_iter_, back.log_likelihood_) == (gm.converged_, gm.n_iter_, gm.log_likelihood_)
+    assert back.criterion_table_ == gm.criterion_table_ and back.n_iter_ > 1 and len(back.criterion_table_) == 14
     np.testing.assert_array_equal(back.terminal_states_, gm.terminal_states_)
     np.testing.assert_array_equal(back.predict_proba(X[:50]), gm.predict_proba(X[:50]))
     with pytest.raises(ValueError, match="means"):
@@ -302,7 +312,9 @@ def test_posteriors_are_exact_for_zero_transitions_and_huge_gaps(k, visits, gap)
     saved = gm_module._hmmc
     try:
         gm_module._hmmc = None
-        f2, s2, ll2 = forward_backward(log_b, pi, P)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")          # log 0 of a state no path reaches: no warning
+            f2, s2, ll2 = forward_backward(log_b, pi, P)
     finally:
         gm_module._hmmc = saved
     np.testing.assert_allclose(f2, ref_f, atol=1e-12)
@@ -485,6 +497,9 @@ def test_inference_of_a_hand_written_model():
     assert gm.score(G) == pytest.approx(ref.score(G), rel=1e-12) == pytest.approx(ll, rel=1e-12)
     two = np.r_[G, G[::-1][:4]]
     assert gm.score(two, [11, 4]) == pytest.approx(ref.score(two, [11, 4]), rel=1e-12)
+    with pytest.raises(ValueError) as info:
+        gm.score(np.zeros((10, 3)))
+    assert str(info.value) == "X: expected 2 features per frame, got shape (10, 3)"
     log_prob, path = ref.decode(G)
     assert np.array_equal(gm.decode(G), path) and path[0] == 0 and path[-1] == 1
     assert viterbi(log_b, arrays["startprob"], arrays["transmat"])[1] == pytest.approx(log_prob, rel=1e-12)
@@ -495,6 +510,7 @@ def test_samples_follow_the_model():
     gm = GoalHMM.from_arrays(arrays, meta)
     G, states = gm.sample(400, random_state=3)
     again = gm.sample(400, random_state=3)
+    assert states.dtype.kind == "i" and G.dtype == np.float64
     assert np.array_equal(G, again[0]) and np.array_equal(states, again[1])
     assert G.shape == (400, 2) and states[0] == 0 and np.all(np.diff(states) >= 0)      # 0 -> 1, never back
     assert 4 <= np.argmax(states == 1) <= 40                                            # leaves 0 at rate 0.1
@@ -522,6 +538,8 @@ def test_to_arrays_and_from_arrays_defaults():
                         "covariance_type": "full", "restart": 2, "converged": True, "n_iter": 0,
                         "log_likelihood": out_meta["log_likelihood"], "criterion_table": []}
     assert json.dumps(out_meta["params"]) and GoalHMM.from_config(GoalModelConfig()).get_params()["covar_reg"] == 0.03
+    params = GoalHMM(criterion="bic", covariance_types=("full", "tied")).get_params()
+    assert params["criterion"] == "bic" and params["covariance_types"] == ["full", "tied"]
     unsorted = GoalHMM.from_arrays({**arrays, "terminal_states": np.array([1.0, 0.0])}, meta)
     assert unsorted.terminal_states_.tolist() == [0, 1] and unsorted.terminal_states_.dtype.kind == "i"
     with pytest.raises(RuntimeError):
@@ -560,6 +578,10 @@ def _arrays_with(**changes):
      "hmm/transmat: row 1 sums to 1 (min entry 0); expected non-negative rows summing to 1"),
     (_arrays_with(covars=np.array([[[0.04, 0.01], [0.0, 0.09]], [[0.01, 0.0], [0.0, 0.01]]])), {},
      "hmm/covars: not symmetric"),
+    (_arrays_with(covars=np.array([[[0.04, 0.01 + 1e-10], [0.01, 0.09]], [[0.01, 0.0], [0.0, 0.01]]])), {},
+     "hmm/covars: not symmetric"),                                   # 1e-10 on 0.01: beyond rounding
+    (_arrays_with(transmat=np.array([[1.0, 0.0], [0.5, 0.4]])), {},   # a zero entry is fine; row 1 is not
+     "hmm/transmat: row 1 sums to 0.9 (min entry 0.4); expected non-negative rows summing to 1"),
     (_arrays_with(terminal_states=np.array([[1]])), {},
      "hmm/terminal_states: [[1]], expected a non-empty list of state indices"),
     (_arrays_with(terminal_states=np.array([0.5])), {},
@@ -587,6 +609,21 @@ def test_each_bad_saved_goal_model_is_named_in_full(arrays, metadata, message):
         assert message.fullmatch(str(info.value)), str(info.value)
     else:
         assert str(info.value) == message
+
+
+def test_saved_model_edges_load():
+    """One state, a one-frame demonstration and integer arrays load (as floats); without a prefix the
+    messages name the bare array."""
+    one = {"startprob": np.array([1]), "transmat": np.array([[1]]), "means": np.array([[0, 1]]),
+           "covars": np.array([[[1, 0], [0, 1]]]), "terminal_states": np.array([0]), "lengths": np.array([1, 30]),
+           "loglik_per_step": np.array([-1, -2])}
+    gm = GoalHMM.from_arrays(one, {})
+    assert gm.n_states_ == 1 and gm.lengths_.tolist() == [1, 30]
+    for name in ("startprob_", "transmat_", "means_", "covars_", "loglik_per_step_"):
+        assert getattr(gm, name).dtype == np.float64
+    with pytest.raises(ValueError) as info:
+        GoalHMM.from_arrays({**one, "lengths": np.array([0])}, {})
+    assert str(info.value) == "lengths: [0], expected demonstration frame counts >= 1"
 
 
 def test_saved_probabilities_within_the_tolerance_load():
@@ -788,3 +825,28 @@ def test_later_initialisations_are_seeded_and_time_ordered():
         nearest = np.argmin(((X[:, None] - means[None]) ** 2).sum(axis=2), axis=1)
         order = [rel_t[nearest == j].mean() for j in range(3)]
         assert order == sorted(order)
+
+
+def test_numpy_recursions_where_no_path_explains_a_frame_from_some_state():
+    """Emissions of -inf (a frame one state cannot emit): the numpy fallbacks keep -inf where no path
+    continues (the backward pass from state 1, which must move to state 2 and cannot emit frame 2)
+    and equal the scipy reference and hmmlearn's compiled recursions, without warnings."""
+    import drake_skill.reward.goal_model as gm_module
+
+    pi = np.array([0.5, 0.5, 0.0])
+    P = np.array([[0.5, 0.5, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    with np.errstate(divide="ignore"):
+        log_b = np.log(np.array([[0.5, 0.2, 0.1], [0.3, 0.4, 0.2], [0.6, 0.1, 0.0], [0.2, 0.3, 0.5]]))
+        log_pi, log_P = np.log(pi), np.log(P)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        la, lb = gm_module._forward_log_np(log_b, log_pi, log_P), gm_module._backward_log_np(log_b, log_P)
+    assert lb[1, 1] == -np.inf and np.isfinite(lb[1, 0])
+    np.testing.assert_array_equal(np.isinf(la), np.isinf(forward_log(log_b, log_pi, log_P)[0]))
+    np.testing.assert_allclose(la, forward_log(log_b, log_pi, log_P)[0], rtol=1e-12)
+    ref_lb = _backward_log(log_b, log_P)
+    np.testing.assert_array_equal(np.isinf(lb), np.isinf(ref_lb))
+    np.testing.assert_allclose(lb[np.isfinite(lb)], ref_lb[np.isfinite(ref_lb)], rtol=1e-12)
+    c_la, c_lb = gm_module._lattices(log_b, pi, P, smooth=True)
+    np.testing.assert_allclose(la, c_la, rtol=1e-12)
+    np.testing.assert_allclose(lb[np.isfinite(lb)], c_lb[np.isfinite(c_lb)], rtol=1e-12)

@@ -866,7 +866,7 @@ class GoalHMM:
         return self
 
 
-def _validate_fitted_arrays(hmm: "GoalHMM", prefix: str = "") -> None:
+def _validate_fitted_arrays(hmm: "GoalHMM", prefix: str) -> None:
     """Checks a fitted model's arrays (see :meth:`GoalHMM.from_arrays`); casts the integer ones."""
     def fail(name, message):
         raise ValueError(f"{prefix}{name}: {message}")
