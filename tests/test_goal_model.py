@@ -538,6 +538,10 @@ def test_to_arrays_and_from_arrays_defaults():
                         "covariance_type": "full", "restart": 2, "converged": True, "n_iter": 0,
                         "log_likelihood": out_meta["log_likelihood"], "criterion_table": []}
     assert json.dumps(out_meta["params"]) and GoalHMM.from_config(GoalModelConfig()).get_params()["covar_reg"] == 0.03
+    given = GoalHMM.from_arrays(arrays, {"converged": False, "n_iter": 7, "log_likelihood": -3.5,
+                                         "criterion_table": [{"k": 2}]})
+    assert (given.converged_, given.n_iter_, given.log_likelihood_, given.criterion_table_) == (False, 7, -3.5,
+                                                                                              [{"k": 2}])
     params = GoalHMM(criterion="bic", covariance_types=("full", "tied")).get_params()
     assert params["criterion"] == "bic" and params["covariance_types"] == ["full", "tied"]
     unsorted = GoalHMM.from_arrays({**arrays, "terminal_states": np.array([1.0, 0.0])}, meta)
