@@ -854,3 +854,10 @@ def test_numpy_recursions_where_no_path_explains_a_frame_from_some_state():
     c_la, c_lb = gm_module._lattices(log_b, pi, P, smooth=True)
     np.testing.assert_allclose(la, c_la, rtol=1e-12)
     np.testing.assert_allclose(lb[np.isfinite(lb)], c_lb[np.isfinite(c_lb)], rtol=1e-12)
+
+
+def test_the_tolerance_reaches_baum_welch():
+    """A tolerance of 1000 nats stops EM at its second iteration (the first gain it can measure)."""
+    _, X, lengths = _data(3, 2)
+    gm = GoalHMM(n_states_min=3, n_states_max=3, n_restarts=1, tol=1e3, covariance_types=["diag"]).fit(X, lengths)
+    assert gm.n_iter_ == 2 and gm.converged_
