@@ -430,6 +430,7 @@ def test_full_covariances_from_the_public_property(ct):
     (lambda: GoalHMM(n_iter=0).fit(np.zeros((5, 2))), "n_restarts, n_iter: (4, 0), expected >= 1"),
     (lambda: GoalHMM(tol=0.0).fit(np.zeros((5, 2))), "tol, covar_reg: (0.0, 0.001), expected > 0"),
     (lambda: GoalHMM(covar_reg=-1.0).fit(np.zeros((5, 2))), "tol, covar_reg: (0.001, -1.0), expected > 0"),
+    (lambda: GoalHMM(covar_reg=0.0).fit(np.zeros((5, 2))), "tol, covar_reg: (0.001, 0.0), expected > 0"),
     (lambda: GoalHMM(n_states_min=3).fit(np.zeros((7, 2)), [5, 2]),
      "lengths: demonstration 1 has 2 frames, fewer than the smallest state count n_states_min=3; "
      "expected every demonstration to have >= 3 frames"),
@@ -459,7 +460,18 @@ def test_sequences_that_are_valid_at_the_edges():
 
 @pytest.mark.parametrize("ct, covariance_params", [("spherical", 3), ("diag", 6), ("full", 9), ("tied", 3)])
 def test_parameter_counts_of_three_states_in_two_dimensions(ct, covariance_params):
-    assert n_free_parameters(3, 2, ct) == 2 + 6 + 6 + covariance_params
+    count = n_free_parameters(3, 2, ct)
+    assert count == 2 + 6 + 6 + covariance_params and isinstance(count, int)
+
+
+def test_a_demonstration_of_exactly_n_states_min_frames_and_constant_data_fit():
+    """The shortest demonstration may have exactly n_states_min frames; goal data that never changes
+    (zero variance) is regularised with covar_reg itself and still fits."""
+    _, X, _ = _data(3, 2, [40, 3])
+    gm = GoalHMM(n_states_min=3, n_states_max=3, n_restarts=1, covariance_types=["diag"]).fit(X, [40, 3])
+    assert gm.n_states_ == 3
+    flat = GoalHMM(n_states_min=1, n_states_max=1, n_restarts=1, covariance_types=["diag"]).fit(np.ones((6, 2)))
+    assert np.all(np.isfinite(flat.covars_)) and np.allclose(flat.means_, 1.0)
 
 
 def test_the_state_count_is_capped_by_the_shortest_demonstration():
