@@ -13,6 +13,7 @@ from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, load_npz
 from goal_model_support import two_state_model_arrays
 from scipy.special import logsumexp
+from scipy.stats import multivariate_normal
 
 from drake_skill.reward.goal_model import (
     GoalHMM,
@@ -484,12 +485,6 @@ def test_the_state_count_is_capped_by_the_shortest_demonstration():
             assert row["aic"] == float(-2 * ll + 2 * p) and row["bic"] == float(-2 * ll + p * np.log(43))
 
 
-def _multivariate_normal_logpdf(G, mean, cov):
-    diff = G - mean
-    _, logdet = np.linalg.slogdet(cov)
-    return -0.5 * (len(mean) * np.log(2 * np.pi) + logdet + np.einsum("td,de,te->t", diff, np.linalg.inv(cov), diff))
-
-
 def test_inference_of_a_hand_written_model():
     """log_emission is the Gaussian log density; filtered, smoothed, score and decode agree with the
     recursions and with hmmlearn's public API on a model with a forbidden transition."""
@@ -499,7 +494,7 @@ def test_inference_of_a_hand_written_model():
     G = np.r_[rng.normal(0.0, 0.2, (6, 2)), rng.normal([1.0, 0.5], 0.1, (5, 2))]
     log_b = gm.log_emission(G)
     for i in range(2):
-        np.testing.assert_allclose(log_b[:, i], _multivariate_normal_logpdf(G, arrays["means"][i], arrays["covars"][i]),
+        np.testing.assert_allclose(log_b[:, i], multivariate_normal.logpdf(G, arrays["means"][i], arrays["covars"][i]),
                                    rtol=1e-12)
     filtered, smoothed, ll = forward_backward(log_b, arrays["startprob"], arrays["transmat"])
     np.testing.assert_array_equal(gm.filtered_posteriors(G), filtered)
@@ -717,8 +712,9 @@ def test_fitted_attributes_are_those_of_the_winning_run(fitted4):
 
 
 def _run_of(history, n_iter=100, tol=1e-3, transmat=((0.9, 0.1), (0.0, 1.0)), startprob=(1.0, 0.0),
-            covariance_type="full", covars=None):
-    """``GoalHMM._validate_run`` of a real hmmlearn model with the given parameters and monitor history."""
+            covariance_type="full", covars=None, frames=None):
+    """``GoalHMM._validate_run`` of a real hmmlearn model with the given parameters and monitor history,
+    on ``frames`` (default: 6 frames near each state's mean); returns ``(run, frames)``."""
     arrays, _ = two_state_model_arrays()
     model = GaussianHMM(n_components=2, covariance_type=covariance_type, init_params="")
     model.n_features = 2
@@ -726,9 +722,11 @@ def _run_of(history, n_iter=100, tol=1e-3, transmat=((0.9, 0.1), (0.0, 1.0)), st
     model.means_ = arrays["means"]
     model.covars_ = arrays["covars"] if covars is None else covars
     model.monitor_.history.extend(history)
-    rng = np.random.default_rng(0)
-    X = np.r_[rng.normal(0.0, 0.1, (6, 2)), rng.normal([1.0, 0.5], 0.05, (6, 2))]
-    return GoalHMM(n_iter=n_iter, tol=tol)._validate_run(model, X, np.array([12]), 3), X
+    X = frames
+    if X is None:
+        rng = np.random.default_rng(0)
+        X = np.r_[rng.normal(0.0, 0.1, (6, 2)), rng.normal([1.0, 0.5], 0.05, (6, 2))]
+    return GoalHMM(n_iter=n_iter, tol=tol)._validate_run(model, X, np.array([len(X)]), 3), X
 
 
 @pytest.mark.parametrize("history, n_iter, converged", [
@@ -771,17 +769,10 @@ def test_occupancy_needed_per_covariance_type(covariance_type, covars, degenerat
 
 def test_a_state_explaining_two_frames_is_degenerate_for_a_full_covariance_only():
     """Occupancy 2 frames: a variance (diag) can be estimated, a 2-D full covariance needs d + 1 = 3."""
-    arrays, _ = two_state_model_arrays()
-    for ct, covars, expected in (("full", arrays["covars"], True), ("diag", np.array([[0.04, 0.09], [0.01, 0.01]]),
-                                                                      False)):
-        model = GaussianHMM(n_components=2, covariance_type=ct, init_params="")
-        model.n_features = 2
-        model.startprob_, model.transmat_ = np.array([1.0, 0.0]), np.array([[0.9, 0.1], [0.0, 1.0]])
-        model.means_, model.covars_ = arrays["means"], covars
-        model.monitor_.history.extend([-10.0, -9.0, -8.9995])
-        rng = np.random.default_rng(0)
-        X = np.r_[rng.normal(0.0, 0.05, (2, 2)), rng.normal([1.0, 0.5], 0.05, (10, 2))]
-        run = GoalHMM()._validate_run(model, X, np.array([12]), 0)
+    rng = np.random.default_rng(0)
+    X = np.r_[rng.normal(0.0, 0.05, (2, 2)), rng.normal([1.0, 0.5], 0.05, (10, 2))]
+    for ct, covars, expected in (("full", None, True), ("diag", np.array([[0.04, 0.09], [0.01, 0.01]]), False)):
+        run, _ = _run_of([-10.0, -9.0, -8.9995], covariance_type=ct, covars=covars, frames=X)
         assert run["min_occupancy"] == pytest.approx(2.0, abs=1e-3) and run["degenerate"] is expected
 
 

@@ -6,6 +6,7 @@ import warnings
 import numpy as np
 import pytest
 from hmmlearn.hmm import GaussianHMM
+from scipy.stats import multivariate_normal
 from pydrake.common.yaml import yaml_load_typed
 
 from drake_skill.bench import reward as bench_reward
@@ -536,9 +537,8 @@ def test_hand_written_rewards_weights_and_verdicts():
     rng = np.random.default_rng(1)
     # Near the references, then a last frame in the terminal state but 30 cm (2 std of S) from them.
     G = np.r_[rng.normal(0.0, 0.05, (5, 2)), rng.normal([1.0, 0.5], 0.05, (4, 2)), [[1.3, 0.5]]]
-    inv, logdet = np.linalg.inv(_S), np.linalg.slogdet(_S)[1]
-    log_norm = -0.5 * (2 * np.log(2 * np.pi) + logdet)
-    ell = np.array([max(-0.5 * (g - x) @ inv @ (g - x) for x in _REFS) for g in G]) + log_norm
+    ell = np.max([multivariate_normal.logpdf(G, x, _S) for x in _REFS], axis=0)     # nearest reference
+    log_norm = multivariate_normal.logpdf(_REFS[1], _REFS[1], _S)
     np.testing.assert_allclose(pomrp.frame_loglik(G), ell, rtol=1e-12)
     assert pomrp.frame_loglik(_REFS[1:2])[0] == pytest.approx(log_norm, abs=1e-12)   # on a reference: the peak
     w = np.minimum(1.0, np.exp(ell - 0.0))
