@@ -1,6 +1,7 @@
 """Goal HMM: state-count selection, robustness of Baum-Welch, inference vs hmmlearn."""
 
 import json
+import logging
 import re
 import warnings
 
@@ -864,3 +865,170 @@ def test_the_tolerance_reaches_baum_welch():
     _, X, lengths = _data(3, 2)
     gm = GoalHMM(n_states_min=3, n_states_max=3, n_restarts=1, tol=1e3, covariance_types=["diag"]).fit(X, lengths)
     assert gm.n_iter_ == 2 and gm.converged_
+
+
+# --------------------------------------------------- fits built to reach rare branches
+def _three_features(seed=0, lengths=(30, 40)):
+    """Two-state left-to-right goal data in 3-D, shifted so each feature has its own mean
+    (the per-feature mean and variance then differ from those of all entries)."""
+    _, X, lengths = _data(2, seed, list(lengths))
+    return X[:, :3] + np.array([1.0, -2.0, 3.0]), np.asarray(lengths)
+
+
+def _m_step(X, G, eps, ct):
+    """The regularised M-step of the goal model's Baum-Welch for posteriors ``G`` (N, k):
+    ``mu_j = sum_t g_tj x_t / n_j``, ``n_j = sum_t g_tj``; full ``(eps I + S_j) / n_j`` with scatter
+    ``S_j = sum_t g_tj (x_t - mu_j)(x_t - mu_j)^T``; diag its diagonal; spherical the mean of that
+    diagonal; tied ``(eps I + sum_j S_j) / N`` (docs/method.md section 3, the goal model)."""
+    n = G.sum(axis=0)
+    mu = G.T @ X / n[:, None]
+    S = np.stack([(G[:, j, None] * (X - mu[j])).T @ (X - mu[j]) for j in range(G.shape[1])])
+    eye = np.eye(X.shape[1])
+    if ct == "full":
+        return mu, (eps * eye + S) / n[:, None, None]
+    if ct == "tied":
+        return mu, np.broadcast_to((eps * eye + S.sum(axis=0)) / n.sum(), S.shape)
+    var = (eps + np.diagonal(S, axis1=1, axis2=2)) / n[:, None]
+    if ct == "spherical":
+        var = np.repeat(var.mean(axis=1, keepdims=True), X.shape[1], axis=1)
+    return mu, var[:, :, None] * eye
+
+
+def _posteriors(X, lengths, start, trans, means, covars):
+    ref = GaussianHMM(n_components=len(start), covariance_type="full", init_params="")
+    ref.startprob_, ref.transmat_, ref.means_, ref.covars_ = start, trans, means, covars
+    return np.concatenate([ref.predict_proba(X[sl]) for sl in np.split(np.arange(len(X)), np.cumsum(lengths)[:-1])])
+
+
+@pytest.mark.parametrize("ct", ["spherical", "diag", "full", "tied"])
+def test_a_converged_fit_is_the_fixed_point_of_the_regularised_m_step(ct):
+    """Run to a tight tolerance, the fitted means and covariances are the M-step of their own
+    posteriors, with eps = covar_reg * (mean per-feature variance)."""
+    X, lengths = _three_features()
+    gm = GoalHMM(n_states_min=2, n_states_max=2, n_restarts=1, covariance_types=[ct], tol=1e-9, n_iter=1000,
+                 covar_reg=0.05).fit(X, lengths)
+    assert gm.converged_
+    G = _posteriors(X, lengths, gm.startprob_, gm.transmat_, gm.means_, gm.covars_)
+    mu, covars = _m_step(X, G, 0.05 * X.var(axis=0).mean(), ct)
+    np.testing.assert_allclose(gm.means_, mu, rtol=1e-8)
+    np.testing.assert_allclose(gm.covars_, covars, rtol=1e-6, atol=1e-12)
+
+
+@pytest.mark.parametrize("ct", ["spherical", "diag", "full", "tied"])
+def test_one_iteration_is_the_m_step_of_the_first_initialisation(ct):
+    """n_iter = 1: the fit is one M-step from the posteriors of restart 0's initialisation, whose
+    covariances enter as themselves (full), their mean (tied), diagonal (diag) or mean variance
+    (spherical)."""
+    X, lengths = _three_features()
+    gm = GoalHMM(n_states_min=2, n_states_max=2, n_restarts=1, covariance_types=[ct], n_iter=1,
+                 covar_reg=0.05).fit(X, lengths)
+    eps = 0.05 * X.var(axis=0).mean()
+    _, start, trans, means, covs = next(gm._inits(X, lengths, 2, ["spherical", "diag", "full", "tied"].index(ct), eps))
+    eye = np.eye(3)
+    covs = {"full": covs, "tied": np.broadcast_to(covs.mean(axis=0), covs.shape),
+            "diag": np.diagonal(covs, axis1=1, axis2=2)[:, :, None] * eye,
+            "spherical": np.trace(covs, axis1=1, axis2=2)[:, None, None] / 3 * eye}[ct]
+    mu, covars = _m_step(X, _posteriors(X, lengths, start, trans, means, covs), eps, ct)
+    np.testing.assert_allclose(gm.means_, mu, rtol=1e-8)
+    np.testing.assert_allclose(gm.covars_, covars, rtol=1e-6, atol=1e-12)
+
+
+def test_constant_goal_data_is_regularised_by_covar_reg_itself():
+    """Zero variance: eps = covar_reg * 1, so one state over six identical frames has variance eps / 6."""
+    flat = GoalHMM(n_states_min=1, n_states_max=1, n_restarts=1, covariance_types=["diag"],
+                   covar_reg=0.03).fit(np.ones((6, 2)))
+    np.testing.assert_allclose(flat.covars_, [0.005 * np.eye(2)], rtol=1e-9)
+
+
+class _FarLastState(GoalHMM):
+    """Fault injection: restart 0 starts its last state's mean far from every frame, so that state
+    receives no frame in the first E-step and keeps none."""
+
+    def _inits(self, X, lengths, k, ct_index, eps):
+        logging.getLogger("drake_skill.test").warning("far start")  # the user's logs must still reach them
+        for r, start, trans, means, covs in super()._inits(X, lengths, k, ct_index, eps):
+            means = means.copy()
+            means[-1] = X.mean(axis=0) + 1e3 * X.std(axis=0).max()
+            yield r, start, trans, means, covs
+
+
+@pytest.mark.parametrize("ct, pseudo_frames", [("spherical", 1e-5), ("diag", 1e-5), ("full", 1e-8)])
+def test_a_state_that_loses_every_frame_gets_the_prior(ct, pseudo_frames, caplog):
+    """A state with no frame: its mean is the data's per-feature mean (the means prior), its covariance
+    eps I over the prior's pseudo-occupancy (1e-8 for full; hmmlearn's floor 1e-5 for diag/spherical),
+    its row absorbing; the run is usable, labelled degenerate, and no warning or hmmlearn log escapes,
+    while other loggers still reach the user."""
+    X, lengths = _three_features()
+    caplog.set_level(logging.DEBUG)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        gm = _FarLastState(n_states_min=3, n_states_max=3, n_restarts=1, covariance_types=[ct]).fit(X, lengths)
+    eps = 1e-3 * X.var(axis=0).mean()
+    assert [row["status"] for row in gm.criterion_table_] == ["degenerate"]
+    np.testing.assert_allclose(gm.means_[2], X.mean(axis=0), rtol=1e-9)
+    np.testing.assert_allclose(gm.covars_[2], eps / pseudo_frames * np.eye(3), rtol=1e-6)
+    assert gm.transmat_[2].tolist() == [0.0, 0.0, 1.0] and gm.startprob_[2] == 0.0
+    assert [(r.name, r.getMessage()) for r in caplog.records] == [("drake_skill.test", "far start")]
+    assert logging.getLogger("hmmlearn").level == logging.NOTSET  # restored after the fit
+
+
+class _FailingRuns(GoalHMM):
+    """Fault injection: the runs of the state counts in ``fail_k`` and the restarts in ``fail_restarts``
+    are unusable (as non-finite parameters make them)."""
+
+    def __init__(self, fail_k=(), fail_restarts=(), **kwargs):
+        super().__init__(**kwargs)
+        self.fail_k, self.fail_restarts = fail_k, fail_restarts
+
+    def _validate_run(self, model, X, lengths, r):
+        if model.n_components in self.fail_k or r in self.fail_restarts:
+            return None
+        return super()._validate_run(model, X, lengths, r)
+
+
+def test_a_candidate_whose_every_run_fails_is_a_failed_row():
+    X, lengths = _three_features()
+    kwargs = dict(n_states_min=2, n_states_max=3, n_restarts=1, covariance_types=["diag"])
+    gm = _FailingRuns(fail_k=(2,), **kwargs).fit(X, lengths)
+    assert gm.criterion_table_[0] == {"k": 2, "covariance_type": "diag", "n_params": n_free_parameters(2, 3, "diag"),
+                                      "status": "failed", "log_likelihood": None, "aic": None, "bic": None,
+                                      "restart": None, "converged": False, "n_iter": None}
+    assert gm.criterion_table_[1]["status"] == "ok" and gm.n_states_ == 3
+    with pytest.raises(RuntimeError, match=r"^GoalHMM\.fit: every Baum-Welch run produced non-finite parameters$"):
+        _FailingRuns(fail_k=(2, 3), **kwargs).fit(X, lengths)
+
+
+def test_a_failed_restart_is_followed_by_the_next():
+    X, lengths = _three_features()
+    kwargs = dict(n_states_min=2, n_states_max=2, n_restarts=2, covariance_types=["diag"])
+    assert _FailingRuns(fail_restarts=(0,), **kwargs).fit(X, lengths).restart_ == 1
+
+    class BadFirstStart(GoalHMM):  # restart 0's start probabilities sum to 2: hmmlearn raises ValueError
+        def _inits(self, X, lengths, k, ct_index, eps):
+            for r, start, *rest in super()._inits(X, lengths, k, ct_index, eps):
+                yield (r, start * 2.0 if r == 0 else start, *rest)
+
+    assert BadFirstStart(**kwargs).fit(X, lengths).restart_ == 1
+
+
+def test_a_proper_restart_beats_a_degenerate_one_of_higher_likelihood():
+    class FirstDegenerate(GoalHMM):
+        def _validate_run(self, model, X, lengths, r):
+            run = super()._validate_run(model, X, lengths, r)
+            return dict(run, degenerate=True, log_likelihood=run["log_likelihood"] + 1e3) if r == 0 else run
+
+    X, lengths = _three_features()
+    gm = FirstDegenerate(n_states_min=2, n_states_max=2, n_restarts=2, covariance_types=["diag"]).fit(X, lengths)
+    assert gm.restart_ == 1 and gm.criterion_table_[0]["status"] == "ok"
+
+
+def test_the_terminal_state_is_the_last_frames_viterbi_state():
+    """Each demonstration ends with one frame far from the rest: that frame's state is terminal,
+    not the state of the frame before it."""
+    rng = np.random.default_rng(0)
+    demo = lambda: np.r_[rng.normal(0.0, 0.1, (8, 2)), rng.normal(3.0, 0.1, (8, 2)), rng.normal(9.0, 0.1, (1, 2))]  # noqa: E731
+    X = np.concatenate([demo() for _ in range(3)])
+    gm = GoalHMM(n_states_min=3, n_states_max=3, n_restarts=1, covariance_types=["diag"]).fit(X, [17, 17, 17])
+    last = int(np.argmin(np.linalg.norm(gm.means_ - 9.0, axis=1)))
+    assert gm.terminal_states_.tolist() == [last]
+    assert gm.decode(X[:17])[-2] != last
