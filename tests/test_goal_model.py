@@ -737,10 +737,18 @@ def _run_of(history, n_iter=100, tol=1e-3, transmat=((0.9, 0.1), (0.0, 1.0)), st
     ([-10.0, -9.0, -8.9995], 3, False),               # the budget ran out (hmmlearn says converged)
     ([-10.0, -9.0, -9.5, -9.4999], 100, False),       # a real likelihood drop
     ([-1000.0, -999.0, -999.000001, -999.0000005], 100, True),   # a drop of 1e-6 nats: rounding at 1e3
+    ([-3.0, -1.0, -1.000000015], 100, False),         # 1.5e-8 nats below 1 nat: the floor of 1e-8 nats
+    ([], 100, False),                                 # no iteration at all
 ])
 def test_convergence_rule_on_the_monitor_history(history, n_iter, converged):
     run, _ = _run_of(history, n_iter=n_iter)
     assert run["converged"] is converged and run["n_iter"] == len(history) and run["restart"] == 3
+
+
+def test_a_last_gain_of_exactly_the_tolerance_is_not_convergence():
+    """hmmlearn stops when the gain is below tol; a gain equal to tol (exact in binary) is not."""
+    assert not _run_of([-10.0, -9.0, -8.5], tol=0.5)[0]["converged"]
+    assert _run_of([-10.0, -9.0, -8.5], tol=0.5000001)[0]["converged"]
 
 
 def test_validated_run_repairs_and_measures():
@@ -775,6 +783,27 @@ def test_a_state_explaining_two_frames_is_degenerate_for_a_full_covariance_only(
     for ct, covars, expected in (("full", None, True), ("diag", np.array([[0.04, 0.09], [0.01, 0.01]]), False)):
         run, _ = _run_of([-10.0, -9.0, -8.9995], covariance_type=ct, covars=covars, frames=X)
         assert run["min_occupancy"] == pytest.approx(2.0, abs=1e-3) and run["degenerate"] is expected
+
+
+@pytest.mark.parametrize("covariance_type, covars, n0, degenerate", [
+    ("full", np.array([[[0.01, 0.0], [0.0, 0.01]]] * 2), 2, True),     # 2.5 frames < d + 1 = 3
+    ("full", np.array([[[0.01, 0.0], [0.0, 0.01]]] * 2), 3, False),    # 3.5 frames
+    ("diag", np.full((2, 2), 0.01), 1, True),                          # 1.5 < 2
+    ("diag", np.full((2, 2), 0.01), 2, False),                         # 2.5
+    ("spherical", np.full(2, 0.01), 1, True),
+    ("spherical", np.full(2, 0.01), 2, False),
+    ("tied", np.array([[0.01, 0.0], [0.0, 0.01]]), 0, False),          # half a frame: tied needs none
+])
+def test_the_occupancy_a_covariance_needs_is_sharp(covariance_type, covars, n0, degenerate):
+    """State 0 explains n0 frames at its mean plus half of a frame at the midpoint of the two means
+    (equal densities, and stay probabilities equal so either split of the path is as likely):
+    degenerate exactly when n0 + 0.5 is below d + 1 (full), 2 (diag, spherical) or 0 (tied)."""
+    arrays, _ = two_state_model_arrays()
+    m0, m1 = arrays["means"]
+    X = np.r_[np.tile(m0, (n0, 1)), [(m0 + m1) / 2], np.tile(m1, (10, 1))]
+    run, _ = _run_of([-10.0, -9.0, -8.9995], transmat=((0.9, 0.1), (0.1, 0.9)), startprob=(0.9, 0.1),
+                     covariance_type=covariance_type, covars=covars, frames=X)
+    assert run["min_occupancy"] == pytest.approx(n0 + 0.5, abs=1e-6) and run["degenerate"] is degenerate
 
 
 def test_unusable_runs_are_dropped():
