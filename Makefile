@@ -40,6 +40,11 @@ notebooks: setup
 # picks some: `make mutation MUTATE="drake_skill.reward.mrp drake_skill.fileio"`);
 # mutmut runs each mutant against only the tests of the selection that call the
 # mutated function, and resumes where it stopped. Scores: docs/mutation.md.
+# mutmut forks each mutant's test run from one process: with more than one
+# OpenMP or BLAS thread started before the fork, a child that first calls
+# k-means or a threaded solve waits forever on a lock of the parent's pool, so
+# the pools are kept to one thread (the tests do not depend on thread counts).
+MUTATION_ENV = OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 MUTATE ?= drake_skill.action.quaternion drake_skill.reward.mrp drake_skill.fileio \
 	drake_skill.learning.policy_search drake_skill.reward.pomrp drake_skill.perception.features \
 	drake_skill.action.dmp drake_skill.perception.segmentation drake_skill.demos.format \
@@ -50,7 +55,7 @@ mutation: setup
 	@mkdir -p mutants
 	@for m in $(MUTATE); do \
 		echo "== mutmut run $$m.* (log: mutants/$$m.log)"; \
-		nice -n 15 $(VENV)/bin/mutmut run --max-children $(MUTMUT_CHILDREN) "$$m.*" > mutants/$$m.log 2>&1 \
+		$(MUTATION_ENV) nice -n 15 $(VENV)/bin/mutmut run --max-children $(MUTMUT_CHILDREN) "$$m.*" > mutants/$$m.log 2>&1 \
 			|| { tail -n 40 mutants/$$m.log; exit 1; }; \
 	done
 	$(VENV)/bin/mutmut results
