@@ -864,6 +864,70 @@ def test_later_initialisations_are_seeded_and_time_ordered():
         assert order == sorted(order)
 
 
+@pytest.mark.parametrize("r", [1, 2, 3])
+def test_later_restarts_follow_their_documented_recipes(r):
+    """Restart r draws from default_rng([random_state, k, covariance type index, r]). Even r > 0: each
+    demonstration cut at Dirichlet(2, ..., 2) fractions of its length (a frame on a cut starts the next
+    segment), refined by segmental k-means. Odd r: k-means with one initialisation seeded from that
+    generator, clusters relabelled in order of their frames' mean relative time."""
+    from sklearn.cluster import KMeans
+
+    from drake_skill.reward.goal_model import _segmental_kmeans
+
+    X, lengths = np.random.default_rng(0).normal(size=(70, 2)), [30, 40]   # no structure: starts matter
+    k, ct_index = 3, 1
+    inits = list(GoalHMM(n_restarts=4, random_state=5)._inits(X, np.array(lengths), k, ct_index, 1e-3))
+    rng = np.random.default_rng([5, k, ct_index, r])
+    segs = [X[:30], X[30:]]
+    if r % 2 == 0:
+        labels = []
+        for s in segs:
+            cuts = np.round(np.cumsum(rng.dirichlet(np.full(k, 2.0)))[:-1] * len(s)).astype(int)
+            labels.append(np.searchsorted(cuts, np.arange(len(s)), side="right"))
+        lab = _segmental_kmeans(segs, labels, k)
+    else:
+        raw = KMeans(n_clusters=k, n_init=1, random_state=int(rng.integers(2**31 - 1))).fit_predict(X)
+        rel_t = np.r_[np.linspace(0, 1, 30), np.linspace(0, 1, 40)]
+        lab = np.argsort(np.argsort([rel_t[raw == j].mean() for j in range(k)]))[raw]
+    np.testing.assert_allclose(inits[r][3], [X[lab == j].mean(axis=0) for j in range(k)], rtol=1e-12)
+
+
+def _init_covariance(pts, X, k, eps):
+    """Restart covariances: the label's biased sample covariance pulled toward the global diagonal
+    (variance + eps) by d + 2 pseudo-frames split over the k states, plus eps I."""
+    n, d = pts.shape
+    S = np.cov(pts.T, bias=True) if n > 1 else np.zeros((d, d))
+    glob = np.diag(X.var(axis=0) + eps)
+    return (n * S + (d + 2.0) * glob / k) / (n + d + 2.0) + eps * np.eye(d)
+
+
+def test_first_initialisation_of_one_short_demonstration():
+    """One demonstration of three well-separated pairs, three states: each state's mean and covariance
+    are its pair's; of three frames: each state is one frame, with no sample covariance."""
+    pairs = np.array([[0.0, 0.0], [0.1, 0.05], [3.0, 1.0], [3.2, 0.9], [6.0, 2.0], [5.9, 2.2]])
+    for X, per_state in ((pairs, 2), (pairs[::2], 1)):
+        _, _, _, means, covs = next(GoalHMM(n_restarts=1)._inits(X, np.array([len(X)]), 3, 1, 1e-3))
+        for j in range(3):
+            pts = X[per_state * j:per_state * (j + 1)]
+            np.testing.assert_allclose(means[j], pts.mean(axis=0), rtol=1e-12)
+            np.testing.assert_allclose(covs[j], _init_covariance(pts, X, 3, 1e-3), rtol=1e-12)
+
+
+def test_a_state_the_alignment_leaves_empty_starts_on_one_random_frame():
+    """Two 3-frame demonstrations whose left-to-right alignment never reaches state 2: that state starts
+    on the one frame drawn from restart 0's generator, with no sample covariance."""
+    from drake_skill.reward.goal_model import _change_point_labels, _segmental_kmeans
+
+    rng = np.random.default_rng(502)
+    segs = [rng.normal(size=(int(rng.integers(3, 7)), 2)) for _ in range(2)]
+    X = np.concatenate(segs)
+    assert 2 not in _segmental_kmeans(segs, [_change_point_labels(s, 3) for s in segs], 3)
+    _, _, _, means, covs = next(GoalHMM(n_restarts=1, random_state=0)._inits(X, np.array([3, 3]), 3, 1, 1e-3))
+    pick = X[np.random.default_rng([0, 3, 1, 0]).integers(len(X), size=1)]
+    np.testing.assert_allclose(means[2], pick[0], rtol=1e-12)
+    np.testing.assert_allclose(covs[2], _init_covariance(pick, X, 3, 1e-3), rtol=1e-12)
+
+
 def test_numpy_recursions_where_no_path_explains_a_frame_from_some_state():
     """Emissions of -inf (a frame one state cannot emit): the numpy fallbacks keep -inf where no path
     continues (the backward pass from state 1, which must move to state 2 and cannot emit frame 2)
