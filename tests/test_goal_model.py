@@ -906,11 +906,23 @@ def test_first_initialisation_of_one_short_demonstration():
     are its pair's; of three frames: each state is one frame, with no sample covariance."""
     pairs = np.array([[0.0, 0.0], [0.1, 0.05], [3.0, 1.0], [3.2, 0.9], [6.0, 2.0], [5.9, 2.2]])
     for X, per_state in ((pairs, 2), (pairs[::2], 1)):
-        _, _, _, means, covs = next(GoalHMM(n_restarts=1)._inits(X, np.array([len(X)]), 3, 1, 1e-3))
+        _, _, trans, means, covs = next(GoalHMM(n_restarts=1)._inits(X, np.array([len(X)]), 3, 1, 1e-3))
         for j in range(3):
             pts = X[per_state * j:per_state * (j + 1)]
             np.testing.assert_allclose(means[j], pts.mean(axis=0), rtol=1e-12)
             np.testing.assert_allclose(covs[j], _init_covariance(pts, X, 3, 1e-3), rtol=1e-12)
+        # 1 - 1 / duration is 0.5 or 0 here: the stay probability's floor 0.5 holds either way.
+        expected = np.array([[0.49, 0.49, 0.01], [0.01, 0.49, 0.49], [0.01, 0.01, 0.98]])
+        np.testing.assert_allclose(trans, expected / expected.sum(axis=1, keepdims=True), rtol=1e-12)
+
+
+def test_first_initialisation_of_long_segments_with_two_states():
+    """200 frames per state: stay 1 - 1/200 is capped at 0.98 (state 0 keeps 0.98 once its row is
+    normalised); with two states the last state's whole leak 0.02 goes to the one other state."""
+    X = np.repeat([[0.0, 0.0], [3.0, 1.0]], 200, axis=0) + np.random.default_rng(0).normal(0.0, 0.1, (400, 2))
+    _, start, trans, _, _ = next(GoalHMM(n_restarts=1)._inits(X, np.array([400]), 2, 1, 1e-3))
+    np.testing.assert_allclose(start, [0.98, 0.02], rtol=1e-12)
+    np.testing.assert_allclose(trans, [[0.98, 0.02], [0.02, 0.98]], rtol=1e-12)
 
 
 def test_a_state_the_alignment_leaves_empty_starts_on_one_random_frame():
