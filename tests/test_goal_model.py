@@ -667,6 +667,17 @@ def test_change_points_are_the_least_squares_split(seed, k):
     assert np.array_equal(_change_point_labels(s, k), _brute_force_change_points(s, k))
 
 
+def test_change_points_weigh_the_first_frame_and_exact_zeros():
+    """The first frame is part of the first segment (an outlier there gets a segment of its own), and
+    goal data with exact zeros splits as any other."""
+    from drake_skill.reward.goal_model import _change_point_labels
+
+    s = np.array([[10.0, 1.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [5.0, 0.0], [5.0, 0.0]])
+    for k in (2, 3):
+        assert np.array_equal(_change_point_labels(s, k), _brute_force_change_points(s, k))
+    assert _change_point_labels(s, 2).tolist() == [0, 1, 1, 1, 1, 1]
+
+
 def test_segmental_kmeans_is_a_fixed_point_of_the_left_to_right_alignment():
     """Each demonstration's labels are the cheapest path 0 -> ... (stay or step one state on) against
     the means of those labels, found here by enumerating every such path."""
@@ -680,16 +691,21 @@ def test_segmental_kmeans_is_a_fixed_point_of_the_left_to_right_alignment():
     labels = _segmental_kmeans(segs, start, k)
     X = np.concatenate(segs)
     means = np.array([X[labels == j].mean(axis=0) for j in range(k)])
-    offset = 0
+    np.testing.assert_array_equal(labels, _cheapest_left_to_right_paths(segs, means))
+    assert not np.array_equal(labels, np.concatenate(start))              # the rounds moved something
+
+
+def _cheapest_left_to_right_paths(segs, means):
+    """Each sequence's cheapest path 0 -> ... (stay or step one state on, squared distances to the
+    means), by enumerating every such path; concatenated."""
+    best = []
     for s in segs:
         n = len(s)
         cost = ((s[:, None] - means[None]) ** 2).sum(axis=2)
         paths = [np.r_[0, np.cumsum(steps)] for steps in np.ndindex(*[2] * (n - 1))]
-        paths = [p for p in paths if p.max() < k]
-        best = min(paths, key=lambda p: cost[np.arange(n), p].sum())
-        assert np.array_equal(labels[offset:offset + n], best)
-        offset += n
-    assert not np.array_equal(labels, np.concatenate(start))              # the rounds moved something
+        paths = [p for p in paths if p.max() < len(means)]
+        best.append(min(paths, key=lambda p: cost[np.arange(n), p].sum()))
+    return np.concatenate(best)
 
 
 # ----------------------------------------------------------- what fit keeps, and its rules
@@ -933,7 +949,13 @@ def test_a_state_the_alignment_leaves_empty_starts_on_one_random_frame():
     rng = np.random.default_rng(502)
     segs = [rng.normal(size=(int(rng.integers(3, 7)), 2)) for _ in range(2)]
     X = np.concatenate(segs)
-    assert 2 not in _segmental_kmeans(segs, [_change_point_labels(s, 3) for s in segs], 3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        labels = _segmental_kmeans(segs, [_change_point_labels(s, 3) for s in segs], 3)
+    assert 2 not in labels
+    # Still a fixed point: the empty state's mean is that of all frames.
+    means = np.array([X[labels == 0].mean(axis=0), X[labels == 1].mean(axis=0), X.mean(axis=0)])
+    np.testing.assert_array_equal(labels, _cheapest_left_to_right_paths(segs, means))
     _, _, _, means, covs = next(GoalHMM(n_restarts=1, random_state=0)._inits(X, np.array([3, 3]), 3, 1, 1e-3))
     pick = X[np.random.default_rng([0, 3, 1, 0]).integers(len(X), size=1)]
     np.testing.assert_allclose(means[2], pick[0], rtol=1e-12)
