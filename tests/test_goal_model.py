@@ -536,7 +536,9 @@ def test_to_arrays_and_from_arrays_defaults():
     assert (gm.n_states_, gm.n_features_in_, gm.covariance_type_, gm.restart_, gm.converged_, gm.n_iter_) == (
         2, 2, "full", 0, True, 0)
     assert np.isnan(gm.log_likelihood_) and gm.criterion_table_ == []
-    assert gm.get_params() == GoalHMM().get_params()
+    assert gm.get_params() == GoalHMM().get_params() == {
+        "n_states_min": 2, "n_states_max": 8, "criterion": "aic", "covariance_types": ["diag", "full"],
+        "n_restarts": 4, "n_iter": 100, "tol": 1e-3, "covar_reg": 1e-3, "random_state": 0}
     out, out_meta = GoalHMM.from_arrays(arrays, {**meta, "params": {"n_states_max": 5}, "restart": 2}).to_arrays()
     assert sorted(out) == sorted(arrays)
     for name, value in arrays.items():
