@@ -1062,11 +1062,23 @@ def test_one_iteration_is_the_m_step_of_the_first_initialisation(ct):
     np.testing.assert_allclose(gm.covars_, covars, rtol=1e-6, atol=1e-12)
 
 
-def test_constant_goal_data_is_regularised_by_covar_reg_itself():
-    """Zero variance: eps = covar_reg * 1, so one state over six identical frames has variance eps / 6."""
+@pytest.mark.parametrize("value", [1.0, 0.3])
+def test_constant_goal_data_is_regularised_by_covar_reg_itself(value):
+    """Goal data that never changes: eps = covar_reg * 1, so one state over six identical frames has
+    variance eps / 6, also for a value (0.3) whose computed variance is rounding (about 1e-33), not 0."""
     flat = GoalHMM(n_states_min=1, n_states_max=1, n_restarts=1, covariance_types=["diag"],
-                   covar_reg=0.03).fit(np.ones((6, 2)))
-    np.testing.assert_allclose(flat.covars_, [0.005 * np.eye(2)], rtol=1e-9)
+                   covar_reg=0.03).fit(np.full((12, 2), value), [6, 6])
+    np.testing.assert_allclose(flat.covars_, [0.0025 * np.eye(2)], rtol=1e-9, atol=1e-20)
+
+
+def test_regulariser_scale_is_the_mean_variance_above_rounding():
+    from drake_skill.reward.goal_model import regulariser_scale
+
+    X = np.random.default_rng(0).normal([1.0, -2.0], [0.5, 2.0], (200, 2))
+    assert regulariser_scale(X) == pytest.approx(X.var(axis=0).mean(), rel=1e-12)
+    assert regulariser_scale(np.full((5, 3), 0.3)) == 1.0 and regulariser_scale(np.zeros((5, 3))) == 1.0
+    tiny = np.r_[np.zeros((5, 1)), np.full((5, 1), 1e-10)]        # a real spread of 5e-11, far above rounding
+    assert regulariser_scale(tiny) == pytest.approx(0.25e-20, rel=1e-12)
 
 
 class _FarLastState(GoalHMM):

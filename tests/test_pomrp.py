@@ -436,8 +436,14 @@ def test_off_model_range_is_each_demonstration_against_the_others(pomrp):
     """frame_loglik_range: the log-density of every demonstration frame at its nearest frame of
     the *other* demonstrations (leave one demonstration out), under the data covariance S:
     (quantile, max) of l_t = -0.5 (d log 2 pi + log det S) - 0.5 min_j |y_t - r_j|^2_S."""
-    X, S = pomrp.references, pomrp.data_covar
-    lengths = [50, 60, 45]                     # the fixture's demonstrations, in order
+    expected = _expected_frame_loglik_range(pomrp.references, pomrp.data_covar, [50, 60, 45],  # the fixture's
+                                            pomrp.off_model_config.quantile)
+    assert pomrp.frame_loglik_range == pytest.approx(expected, rel=1e-9, abs=1e-9)
+
+
+def _expected_frame_loglik_range(X, S, lengths, quantile, state_means=None):
+    """(quantile, max) of l_t = -0.5 (d log 2 pi + log det S) - 0.5 min_j |x_t - r_j|^2_S over every
+    demonstration frame, r_j the frames of the other demonstrations (the state means if there is one)."""
     Sinv = np.linalg.inv(S)
     log_norm = -0.5 * (len(S) * np.log(2 * np.pi) + np.linalg.slogdet(S)[1])
     ends = np.cumsum(lengths)
@@ -445,12 +451,39 @@ def test_off_model_range_is_each_demonstration_against_the_others(pomrp):
     for end, n in zip(ends, lengths):
         own = np.zeros(len(X), bool)
         own[end - n:end] = True
-        diff = X[own][:, None, :] - X[~own][None, :, :]
+        refs = X[~own] if state_means is None else state_means
+        diff = X[own][:, None, :] - refs[None, :, :]
         d2 = np.einsum("tjd,de,tje->tj", diff, Sinv, diff)
         l_loo.append(log_norm - 0.5 * d2.min(axis=1))
     l_loo = np.concatenate(l_loo)
-    q = pomrp.off_model_config.quantile
-    assert pomrp.frame_loglik_range == pytest.approx((np.quantile(l_loo, q), l_loo.max()), rel=1e-9, abs=1e-9)
+    return np.quantile(l_loo, quantile), l_loo.max()
+
+
+def _small_config(n_states=4, **kwargs):
+    from drake_skill.reward.goal_model import GoalModelConfig
+
+    return PomrpConfig(goal_model=GoalModelConfig(n_states_min=n_states, n_states_max=n_states,
+                                                  covariance_types=["diag"], n_restarts=1, n_iter=20), **kwargs)
+
+
+@pytest.mark.parametrize("lengths", [[40], [30, 34]])
+def test_off_model_range_of_one_and_two_demonstrations(lengths):
+    """One demonstration: its frames against the goal model's state means; two: each against the other.
+    The verdict settings given reach the fitted reward."""
+    X, lengths = sample_demonstrations(TRUE, lengths, seed=3)
+    config = _small_config(verdict=VerdictConfig(require_likelihood=True, loglik_margin=0.5))
+    fitted = fit_pomrp(X, lengths, config)
+    assert fitted.verdict_config == config.verdict
+    means = fitted.goal_model.means_ if len(lengths) == 1 else None
+    expected = _expected_frame_loglik_range(X, fitted.data_covar, lengths, config.off_model.quantile, means)
+    assert fitted.frame_loglik_range == pytest.approx(expected, rel=1e-9, abs=1e-9)
+
+
+def test_off_model_covariance_of_constant_goal_data():
+    """Goal data that never changes (0.3: a variance at the rounding level, not 0): the frame covariance is
+    covar_reg times the identity (a unit mean variance)."""
+    fitted = fit_pomrp(np.full((24, 2), 0.3), [12, 12], _small_config(n_states=1))
+    np.testing.assert_allclose(fitted.data_covar, fitted.off_model_config.covar_reg * np.eye(2), rtol=1e-12, atol=1e-20)
 
 
 # ----------------------------------------------------------- a hand-written model: exact contracts

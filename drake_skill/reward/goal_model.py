@@ -25,7 +25,7 @@ not do safely with 2-3 short sequences:
   hmmlearn expects for the covariance type (a scalar prior is broadcast to
   *every entry* of a full matrix, and ``min_covar`` is only used at init);
   ``eps = covar_reg * mean per-dimension variance of all frames``, so it
-  scales with the data;
+  scales with the data (:func:`regulariser_scale`: 1 for goal data that never changes);
 * convergence read from ``monitor_.history`` (hmmlearn's ``converged`` is also
   true when the iteration budget runs out or the likelihood drops);
 * several seeded restarts per candidate ``(k, covariance type)``; the best
@@ -166,6 +166,20 @@ def n_free_parameters(n_states: int, n_features: int, covariance_type: str) -> i
     if covariance_type not in cov:
         raise ValueError(f"covariance_type: {covariance_type!r}, expected one of {COVARIANCE_TYPES}")
     return (k - 1) + k * (k - 1) + k * d + cov[covariance_type]
+
+
+def regulariser_scale(X: np.ndarray) -> float:
+    """The scale of the covariance regularisers: the mean per-feature variance of ``X (N, d)`` (goal
+    units squared), or 1 when that variance is zero *or at the rounding level of the data*.
+
+    Goal data that never changes has variance 0 only if its value is a binary fraction: a constant
+    0.3 has a computed variance of about 1e-33, which would make the regulariser vanish and the
+    Gaussian densities overflow.  A variance below ``16 (machine eps * max |x|)^2`` (a spread of
+    four units in the last place) is indistinguishable from that rounding, so it counts as zero.
+    """
+    var = float(X.var(axis=0).mean())
+    rounding = 16.0 * (np.finfo(float).eps * float(np.abs(X).max(initial=0.0))) ** 2
+    return var if var > rounding else 1.0
 
 
 def _precision_cholesky(covars: np.ndarray):
@@ -537,8 +551,7 @@ class GoalHMM:
                 f"state count n_states_min={k_min}; expected every demonstration to have >= {k_min} frames")
         k_max = min(k_max, int(lengths.min()))
         N, d = X.shape
-        var = X.var(axis=0).mean()
-        eps = float(self.covar_reg) * (var if var > 0 else 1.0)
+        eps = float(self.covar_reg) * regulariser_scale(X)
 
         table = []
         best = None

@@ -46,6 +46,7 @@ from drake_skill.reward.goal_model import (
     check_sequences,
     forward_backward,
     gaussian_log_density,
+    regulariser_scale,
     viterbi,
 )
 from drake_skill.reward.mrp import MrpConfig, monte_carlo_values
@@ -381,8 +382,7 @@ def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
     if not 0.0 <= om.quantile < 1.0:
         raise ValueError(f"off_model.quantile: expected a value in [0, 1), got {om.quantile}")
     S = np.atleast_2d(np.cov(X.T, bias=True))
-    mean_var = float(np.trace(S)) / len(S)
-    S = S + float(om.covar_reg) * (mean_var if mean_var > 0 else 1.0) * np.eye(len(S))
+    S = S + float(om.covar_reg) * regulariser_scale(X) * np.eye(len(S))
     U, log_norm = _precision_cholesky(S[None])
     Y = X @ U[0]
     # Each demonstration's frames against the other demonstrations' (a single
