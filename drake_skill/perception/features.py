@@ -106,7 +106,10 @@ class GoalFeatures:
         pca = PCA(n_components=self.n_components, svd_solver="full").fit(x)
         comps = np.array(pca.components_, dtype=np.float64)
         self.mean_ = np.array(pca.mean_, dtype=np.float64)
-        self.components_ = comps * largest_entry_signs(comps)[:, None]
+        # C order, as from_arrays loads it: BLAS rounds a product differently for a
+        # transposed operand on some CPUs (AVX-512), so a fitted and a loaded skill
+        # would give goal data that differ in the last bits.
+        self.components_ = np.ascontiguousarray(comps * largest_entry_signs(comps)[:, None])
         self.explained_variance_ = np.array(pca.explained_variance_, dtype=np.float64)
         # scikit-learn gives NaN ratios for constant data (0 / 0); the project's are 0 there.
         ratio = np.array(pca.explained_variance_ratio_, dtype=np.float64)
