@@ -85,9 +85,10 @@ CLOUD_FRAMES = ("object", "world")
 
 def default_skill_config(skill) -> SkillConfig:
     """SkillConfig of a skill (a shipped skill's name, a skill file or a SkillSpec),
-    with the skill file's number of DMP bases."""
+    with the skill file's number of DMP bases and unscaled DMP columns."""
     spec = load_skill(skill)
-    return SkillConfig(skill=spec.name, spec=spec, dmp=DmpConfig(n_basis=int(spec.dmp_bases)))
+    return SkillConfig(skill=spec.name, spec=spec, dmp=DmpConfig(n_basis=int(spec.dmp_bases),
+                                                                unscaled_dims=[int(i) for i in spec.dmp_unscaled_dims]))
 
 
 def _pcae_path(config: SkillConfig) -> Path:
@@ -221,7 +222,8 @@ class Skill:
         hmm = self.pomrp.goal_model
         lines = [
             f"skill '{self.name}': {len(self.dmps)} demonstrations, DMP B = {self.config.dmp.n_basis}, "
-            f"initial weights from demonstration {self.initial_index}, "
+            f"initial weights from demonstration {self.initial_index}"
+            f"{' (best learned return)' if 'initial_choice' in self.info else ''}, "
             f"finger opening {1000 * self.gripper_opening:.0f} mm",
             f"PCA 128 -> {self.goal_features.n_components}: explained variance "
             f"{100 * self.info['pca_explained_variance']:.1f} %",

@@ -383,6 +383,14 @@ def test_fit_demonstrations_scales_only_the_columns_that_move():
     assert plain.config.scaled_dims == []
     with pytest.raises(ValueError, match=r"DmpConfig\.scaled_dims: expected distinct weight columns in \[0, 7\)"):
         DmpConfig(scaled_dims=[7]).validate()
+    # unscaled_dims keeps a moving column out of the choice: x keeps its shape from any start.
+    kept = fit_demonstrations([(t, poses), (t, other)], DmpConfig(n_basis=20, unscaled_dims=[0]))
+    assert (kept.config.scaled_dims, kept.config.unscaled_dims) == ([], [0])
+    out = integrate(Dmp(kept.dmps[0].weights, y0, dmp.goal, dmp.tau), kept.config, t)
+    shift = out[:, 0] - poses[:, 0]                   # a start 5 cm back: the offset decays, never grows
+    assert shift[0] == pytest.approx(-0.05) and np.all(np.abs(shift) <= 0.05 + 1e-3) and abs(shift[-1]) < 5e-3
+    with pytest.raises(ValueError, match=r"DmpConfig\.unscaled_dims: expected distinct weight columns in \[0, 7\)"):
+        DmpConfig(unscaled_dims=[0, 0]).validate()
 
 
 def _minimum_jerk(s):

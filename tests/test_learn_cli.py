@@ -11,7 +11,7 @@ import pytest
 
 import drake_skill
 from drake_skill.cli.main import main
-from drake_skill.learning.evaluation import HELD_OUT_SEED0
+from drake_skill.learning.evaluation import CHOICE_SEED0, HELD_OUT_SEED0, apply_initial_rule, best_return_index
 from drake_skill.learning.loop import ARTIFACTS
 from drake_skill.learning.plots import plot_outcomes_by_placement
 from drake_skill.learning.runlog import VERSIONED_PACKAGES, read_progress
@@ -219,3 +219,36 @@ def test_a_learn_run_from_a_config_file_equals_the_same_run_from_flags(learned, 
     settings = {k: v for k, v in json.loads((out / "config.json").read_text()).items() if k != "versions"}
     again = {k: v for k, v in json.loads((tmp_path / "run" / "config.json").read_text()).items() if k != "versions"}
     assert again == settings
+
+
+def test_best_return_index_keeps_the_seeded_pick_on_a_tie():
+    assert best_return_index([3.0, 5.0, 1.0], default=0) == 1
+    assert best_return_index([5.0, 2.0, 5.0], default=2) == 2       # the seed's pick is among the best
+    assert best_return_index([5.0, 2.0, 5.0], default=1) == 0       # it is not: the lowest of the best
+    with pytest.raises(ValueError, match="mean_returns: expected finite returns, one per DMP"):
+        best_return_index([1.0, float("nan")], default=0)
+
+
+def test_best_return_starts_from_the_demonstration_the_learned_reward_rates_best(tmp_path_factory, tmp_path):
+    """A skill file's ``initial_dmp: best-return`` (docs/method.md section 5): the seed drew DMP 1,
+    whose weights are blown up so that its imitation fails (return 0); the learned return of one
+    greedy execution per DMP picks DMP 0, the skill is rewritten with the choice and its record,
+    and ``random`` leaves the seed's pick."""
+    shared = shared_skill(tmp_path_factory)
+    skill = Skill.load(shared["skill_dir"])
+    spec = dc.replace(skill.spec, initial_dmp="best-return", initial_dmp_poses=1)
+    broken = dc.replace(skill, initial_index=1, config=dc.replace(skill.config, spec=spec),
+                        dmps=[skill.dmps[0], dc.replace(skill.dmps[1], weights=skill.dmps[1].weights * 1e3)])
+    broken.save(tmp_path / "best")
+    line = apply_initial_rule(tmp_path / "best", station_config=shared["station"], progress=False)
+    choice = Skill.load(tmp_path / "best").info["initial_choice"]
+    assert choice["seeds"] == [CHOICE_SEED0] and choice["executions"] == 2 and choice["seeded_index"] == 1
+    assert choice["mean_returns"][1] == 0.0 < choice["mean_returns"][0], choice
+    assert choice["index"] == 0 and Skill.load(tmp_path / "best").initial_index == 0
+    assert line.startswith("initial DMP: 0 (best mean learned return over 1 poses: DMP 0 ") and "drew 1)" in line
+    # The ground truth is recorded beside the choice, one list per DMP.
+    assert [len(s) for s in choice["successes"]] == [1, 1]
+    random_spec = dc.replace(spec, initial_dmp="random")
+    dc.replace(broken, config=dc.replace(broken.config, spec=random_spec)).save(tmp_path / "random", overwrite=True)
+    assert apply_initial_rule(tmp_path / "random", station_config=shared["station"], progress=False) is None
+    assert Skill.load(tmp_path / "random").initial_index == 1

@@ -40,6 +40,9 @@ def test_the_shipped_skills_are_data_files():
     assert [s.scenario_path().name for s in (opened, closed, drawn)] == ["box_closed.yaml", "box_open.yaml",
                                                                          "drawer.yaml"]
     assert [len(s.keyframes) for s in (opened, closed, drawn)] == [16, 10, 6]
+    # Draw keeps its hook's x_O and starts from its best-imitating demonstration (docs/method.md 2, 5).
+    assert [(s.dmp_unscaled_dims, s.initial_dmp) for s in (opened, closed, drawn)] == [
+        ([], "random"), ([], "random"), ([0], "best-return")]
     # Open's first via point: the hand turned to point along the hinge, 0.2 m above the lip's side.
     t, p, R, w = keyframes(opened)[0]
     assert (t, w) == (3.0, 0.08)
@@ -86,6 +89,10 @@ def test_a_users_skill_file_loads_with_its_scenario_relative_to_it(tmp_path):
     (dict(p1="[-0.2, 0.0, 1.2]"), "keyframes[0].pose"),
     (dict(name="my skill"), "name"),
     (dict(text="name: push\nscenario: drawer\nsucess: {}\n"), "sucess"),
+    (dict(text="name: push\nscenario: drawer\ninitial_dmp: best\n"), "initial_dmp"),
+    (dict(text="name: push\nscenario: drawer\ninitial_dmp_poses: 0\n"), "initial_dmp_poses"),
+    (dict(text="name: push\nscenario: drawer\ndmp_unscaled_dims: [0, 7]\n"), "dmp_unscaled_dims"),
+    (dict(text="name: push\nscenario: drawer\ndmp_unscaled_dims: [1, 1]\n"), "dmp_unscaled_dims"),
 ])
 def test_a_bad_skill_file_is_one_line_naming_the_file_and_the_field(tmp_path, changes, field):
     path = _write(tmp_path, **changes)

@@ -37,8 +37,9 @@ Equations (one controlled dimension; all dimensions share the phase):
   scaling, as movement_primitives and others do) in the others.
   :func:`fit_demonstrations` fills ``scaled_dims`` with the columns where
   every demonstration moves by at least ``DmpConfig.scale_threshold``
-  (5 cm / 0.05): those keep the thesis's spatial scaling toward a new start,
-  the nearly-still ones (a lift that returns to its height, a quaternion
+  (5 cm / 0.05) and that ``DmpConfig.unscaled_dims`` does not exclude:
+  those keep the thesis's spatial scaling toward a new start, the
+  nearly-still ones (a lift that returns to its height, a quaternion
   component) are not scaled. Both are continuous in ``y0``: an unscaled
   column changes by ``dy0 (1 - K s(t))``, at most ``|dy0|``; a scaled
   column's shape scales by ``(g - y0) / (g - y0_demo)``, which changes sign
@@ -190,6 +191,11 @@ class DmpConfig:
     #: there is at least this (m for xyz, unitless for quaternion components,
     #: rad for "ude" rotations); <= 0 keeps ``scaled_dims`` as given.
     scale_threshold: float = 0.05
+    #: Weight columns fit_demonstrations never scales, whatever they move: a
+    #: motion whose via point along a column is not between start and goal
+    #: (Draw's hook behind the handle, docs/method.md section 2) keeps its
+    #: place in the object frame instead of stretching with g - y0.
+    unscaled_dims: list[int] = field(default_factory=list)
 
     def validate(self) -> "DmpConfig":
         """Raises ValueError naming the first bad field; returns self."""
@@ -205,11 +211,12 @@ class DmpConfig:
             raise ValueError(f"DmpConfig.quaternion: expected one of {_QUATERNION_MODES}, got {self.quaternion!r}")
         if self.regression not in _REGRESSIONS:
             raise ValueError(f"DmpConfig.regression: expected one of {_REGRESSIONS}, got {self.regression!r}")
-        dims = list(self.scaled_dims)
-        if any(not isinstance(i, (int, np.integer)) or isinstance(i, bool) or not 0 <= i < self.weight_dim
-               for i in dims) or len(set(dims)) != len(dims):
-            raise ValueError(f"DmpConfig.scaled_dims: expected distinct weight columns in [0, {self.weight_dim}), "
-                             f"got {dims!r}")
+        for name in ("scaled_dims", "unscaled_dims"):
+            dims = list(getattr(self, name))
+            if any(not isinstance(i, (int, np.integer)) or isinstance(i, bool) or not 0 <= i < self.weight_dim
+                   for i in dims) or len(set(dims)) != len(dims):
+                raise ValueError(f"DmpConfig.{name}: expected distinct weight columns in [0, {self.weight_dim}), "
+                                 f"got {dims!r}")
         if not math.isfinite(self.scale_threshold):
             raise ValueError(f"DmpConfig.scale_threshold: expected a finite value, got {self.scale_threshold!r}")
         return self
@@ -558,7 +565,8 @@ def fit_demonstrations(
         amplitudes = np.stack([np.abs(forcing_amplitude(p[0], p[-1], DmpConfig(
             quaternion=config.quaternion, scale_by_amplitude=True, amplitude_floor=1e-300)))
             for _, p in checked_demos])
-        dims = [int(i) for i in np.flatnonzero(np.all(amplitudes >= config.scale_threshold, axis=0))]
+        dims = [int(i) for i in np.flatnonzero(np.all(amplitudes >= config.scale_threshold, axis=0))
+                if i not in config.unscaled_dims]
         config = dataclasses.replace(config, scaled_dims=dims).validate()
     dmps = [fit_dmp(t, p, config) for t, p in checked_demos]   # quaternions already on the reference's side
     index, _ = initial_weights(dmps, seed)

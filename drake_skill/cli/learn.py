@@ -184,6 +184,7 @@ def _save_demos(demos, directory: Path) -> None:
 
 def prepare_skill(args, out: Path) -> Path:
     """The fitted skill's directory: --skill-dir, fitted from --demos, or recorded and fitted."""
+    from drake_skill.learning.evaluation import apply_initial_rule
     from drake_skill.skill import Skill, default_skill_config, fit_skill
 
     if args.skill_dir is not None and args.demos is not None:
@@ -227,6 +228,11 @@ def prepare_skill(args, out: Path) -> Path:
     print(f"fitting '{name}' from {len(demos)} demonstrations ...")
     skill = fit_skill(demos, default_skill_config(spec))
     skill.save(initial, overwrite=True)
+    chosen = apply_initial_rule(initial, station_config=_station_config(args, spec),
+                                progress=not getattr(args, "quiet", False))
+    if chosen:
+        print(chosen)
+        skill = Skill.load(initial)
     print(skill.summary())
     return initial
 

@@ -285,8 +285,8 @@ def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None
         if skill_dir is not None:
             _copy_skill(Path(skill_dir), initial, skill)
         else:
-            args = argparse.Namespace(skill=source, skill_dir=None, demos=None, station_config=station_yaml,
-                                      quiet=quiet)
+            args = argparse.Namespace(skill=source, skill_dir=None, demos=None, config=None,
+                                      station_config=station_yaml, quiet=quiet)
             prepare_skill(args, Path(out) / skill)
         if Skill.load(initial).name != skill:
             raise ValueError(f"{initial} holds a '{Skill.load(initial).name}' skill, not '{skill}'; "

@@ -12,6 +12,7 @@ This module imports no Drake at import time; the pools import it when used.
 
 from __future__ import annotations
 
+import dataclasses as dc
 import math
 import sys
 import time
@@ -21,11 +22,16 @@ from typing import Any, Callable
 
 import numpy as np
 
-__all__ = ["HELD_OUT_SEED0", "evaluate_greedy", "evaluate_skill", "evaluation_table", "exploration_table",
-           "explore_skill", "results_report"]
+__all__ = ["CHOICE_SEED0", "HELD_OUT_SEED0", "apply_initial_rule", "best_return_index", "choose_initial_dmp",
+           "evaluate_greedy", "evaluate_skill", "evaluation_table", "exploration_table", "explore_skill",
+           "results_report"]
 
 #: First seed of the held-out object poses (drake-skill learn and evaluate use the same).
 HELD_OUT_SEED0 = 900_000
+
+#: First seed of the object poses a skill's initial DMP is chosen on (``initial_dmp: best-return``):
+#: below the held-out ones, and a training rollout's pose seed is a 31-bit draw (``pose_seed``).
+CHOICE_SEED0 = 800_000
 
 
 def evaluate_greedy(pool, weights, seeds, progress: Callable | None = None) -> tuple[dict[str, Any], list]:
@@ -122,6 +128,64 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
         if str(skill.initial_index) in report["policies"] else None
     report["wall_s"] = round(time.perf_counter() - start, 1)
     return report
+
+
+def best_return_index(mean_returns, default: int) -> int:
+    """The DMP with the highest mean learned return; exact ties keep ``default`` (the seeded
+    pick) when it is among the best, else the lowest index."""
+    means = np.asarray(mean_returns, dtype=float)
+    if means.ndim != 1 or means.size == 0 or not np.all(np.isfinite(means)):
+        raise ValueError(f"mean_returns: expected finite returns, one per DMP, got {means.tolist()!r}")
+    best = np.flatnonzero(means == means.max())
+    return int(default) if int(default) in best else int(best[0])
+
+
+def choose_initial_dmp(skill_dir, *, poses: int | None = None, station_config=None, rollout_config=None,
+                       workers: int = 1, ray_address: str | None = None, progress: bool = True) -> dict[str, Any]:
+    """Makes the skill in ``skill_dir`` start policy search from its best-imitating demonstration.
+
+    docs/method.md section 5 ("Initial policy"): every demonstration's DMP is
+    executed greedily on ``poses`` object poses (default the skill file's
+    ``initial_dmp_poses``; seeds ``CHOICE_SEED0 ..``, none a held-out pose)
+    and the one with the highest mean learned return R(G) (thesis Eq. 4.5;
+    0 for a failed execution) becomes ``initial_index``
+    (:func:`best_return_index`). The choice reads the learned reward only;
+    the ground truth is recorded beside it, not used. The skill is rewritten
+    in one swap with ``info["initial_choice"]`` (this dict: ``rule``,
+    ``seeds``, ``mean_returns``, ``successes`` (ground truth, per DMP),
+    ``seeded_index``, ``index``, ``executions``), which is returned.
+    """
+    from drake_skill.skill import Skill
+
+    skill = Skill.load(skill_dir)
+    poses = int(skill.spec.initial_dmp_poses if poses is None else poses)
+    report = evaluate_skill(skill_dir, poses=poses, seed0=CHOICE_SEED0, station_config=station_config,
+                            rollout_config=rollout_config, workers=workers, ray_address=ray_address,
+                            all_demos=True, progress=progress)
+    policies = [report["policies"][str(i)] for i in range(len(skill.dmps))]
+    means = [float(np.mean(p["returns"])) for p in policies]
+    seeded = int(skill.info.get("initial_choice", {}).get("seeded_index", skill.initial_index))
+    choice = {"rule": "best-return", "seeds": report["seeds"], "mean_returns": means,
+              "successes": [p["successes"] for p in policies], "seeded_index": seeded,
+              "index": best_return_index(means, seeded), "executions": poses * len(skill.dmps)}
+    dc.replace(skill, initial_index=choice["index"], info={**skill.info, "initial_choice": choice}).save(
+        skill_dir, overwrite=True)
+    return choice
+
+
+def apply_initial_rule(skill_dir, *, station_config=None, workers: int = 1, progress: bool = True) -> str | None:
+    """The skill file's ``initial_dmp`` rule on a freshly fitted skill: with "best-return",
+    :func:`choose_initial_dmp` (a line saying what it chose is returned); with "random" the
+    fit's seeded pick stands (None)."""
+    from drake_skill.skill import Skill
+
+    skill = Skill.load(skill_dir)
+    if skill.spec.initial_dmp != "best-return" or len(skill.dmps) < 2:
+        return None
+    c = choose_initial_dmp(skill_dir, station_config=station_config, workers=workers, progress=progress)
+    returns = ", ".join(f"DMP {i} {r:.1f}" for i, r in enumerate(c["mean_returns"]))
+    return (f"initial DMP: {c['index']} (best mean learned return over {len(c['seeds'])} poses: {returns}; "
+            f"the seed drew {c['seeded_index']})")
 
 
 def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0, station_config=None,

@@ -23,6 +23,9 @@ __all__ = ["Keyframe", "SkillSpec", "keyframes", "load_skill", "shipped_skill_na
 
 SKILL_DIR = Path(__file__).resolve().parent
 
+#: How a skill picks the DMP policy search starts from (SkillSpec.initial_dmp).
+INITIAL_DMP_RULES = ("random", "best-return")
+
 #: The Panda's reach: the hand's TCP at most this far from the shoulder (joint 2's axis,
 #: 0.333 m above the base) [m]: Franka's datasheet gives 855 mm to the flange.
 SHOULDER = np.array([0.0, 0.0, 0.333])
@@ -62,6 +65,15 @@ class SkillSpec:
     dmp_bases: basis functions per DMP dimension (thesis Table 6.1).
     exploration_scale: sigma_0 of thesis Eq. 5.3, a factor on Sigma_b^0
       (docs/method.md section 5).
+    dmp_unscaled_dims: DMP weight columns (0-2: x, y, z of the object frame;
+      3-6: the quaternion w, x, y, z) never scaled by g - y0, whatever the
+      demonstrations move along them (``DmpConfig.unscaled_dims``,
+      docs/method.md section 2); empty: the automatic choice alone.
+    initial_dmp: which demonstration's DMP policy search starts from:
+      "random" (thesis 5.2: drawn by the fit's seed) or "best-return" (the
+      one whose plain imitation earns the highest mean learned return on
+      ``initial_dmp_poses`` object poses; docs/method.md section 5).
+    initial_dmp_poses: object poses per DMP for "best-return".
     gripper_opening: the finger opening [m] the skill holds while it runs;
       None: the median of the demonstrations' (docs/method.md section 2).
     success: the ground-truth rule on the object's joint (simulation only).
@@ -75,6 +87,9 @@ class SkillSpec:
     demonstrations: int = 3
     dmp_bases: int = 10
     exploration_scale: float = 1.0
+    dmp_unscaled_dims: typing.List[int] = dc.field(default_factory=list)
+    initial_dmp: str = "random"
+    initial_dmp_poses: int = 3
     gripper_opening: typing.Optional[float] = None
     success: SuccessConfig = dc.field(default_factory=SuccessConfig)
     keyframes: typing.List[Keyframe] = dc.field(default_factory=list)
@@ -122,6 +137,14 @@ def _check(spec: SkillSpec, where: str) -> SkillSpec:
         _bad(where, "dmp_bases", spec.dmp_bases, "3..100 basis functions (thesis Table 6.1: 9-20)")
     if not (math.isfinite(spec.exploration_scale) and 0 < spec.exploration_scale <= 100):
         _bad(where, "exploration_scale", spec.exploration_scale, "a factor in (0, 100] on Sigma_b^0")
+    dims = list(spec.dmp_unscaled_dims)
+    if any(not 0 <= int(i) <= 6 for i in dims) or len(set(dims)) != len(dims):
+        _bad(where, "dmp_unscaled_dims", dims, "distinct weight columns in 0..6 (0-2: x, y, z; 3-6: quaternion w, x, "
+             "y, z)")
+    if spec.initial_dmp not in INITIAL_DMP_RULES:
+        _bad(where, "initial_dmp", spec.initial_dmp, f"one of {', '.join(INITIAL_DMP_RULES)}")
+    if not 1 <= int(spec.initial_dmp_poses) <= 100:
+        _bad(where, "initial_dmp_poses", spec.initial_dmp_poses, "1..100 object poses per demonstration's DMP")
     if spec.gripper_opening is not None and not 0.0 <= spec.gripper_opening <= 2 * FINGER_MAX:
         _bad(where, "gripper_opening", spec.gripper_opening,
              f"an opening in [0, {2 * FINGER_MAX}] m, or null for the demonstrations' median")
