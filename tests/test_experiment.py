@@ -221,3 +221,18 @@ def test_skills_are_names_or_skill_files(tmp_path):
         GridConfig(skills=("open", str(SKILL_DIR / "open.yaml"))).validate()
     with pytest.raises(ValueError, match=r"^--skills .*nope\.yaml: skill file"):
         GridConfig(skills=(str(tmp_path / "nope.yaml"),)).validate()
+
+
+def test_a_grid_prepares_a_skill_with_learn_s_own_arguments(tmp_path):
+    """A grid with no ``--skill-dir`` records and fits each skill as ``drake-skill learn`` does,
+    with that command's parsed options: the scenario it records on is the skill's under
+    ``--scenario`` (a hand-built namespace once lacked ``--config`` and failed here)."""
+    from drake_skill.cli.learn import _station_config
+    from drake_skill.experiments.grid import learn_arguments
+    from drake_skill.skills import load_skill
+
+    (tmp_path / "near.yaml").write_text("object: {x: 0.62}\n")
+    args = learn_arguments("draw", tmp_path / "near.yaml", quiet=True)
+    assert (args.skill, args.config, args.station_config, args.quiet) == ("draw", None, tmp_path / "near.yaml", True)
+    assert _station_config(args, load_skill("draw")).object.x == 0.62
+    assert _station_config(learn_arguments("draw"), load_skill("draw")).object.x == 0.68

@@ -274,8 +274,6 @@ def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None
     """Each skill's fitted skill ``OUT/SKILL/initial_skill``: recorded and fitted once
     (``drake-skill learn``'s :func:`~drake_skill.cli.learn.prepare_skill`), or copied
     from ``skill_dir`` (one skill only). ``sources``: {name: shipped name or skill file}."""
-    import argparse
-
     from drake_skill.cli.learn import prepare_skill
     from drake_skill.skill import Skill
 
@@ -285,14 +283,25 @@ def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None
         if skill_dir is not None:
             _copy_skill(Path(skill_dir), initial, skill)
         else:
-            args = argparse.Namespace(skill=source, skill_dir=None, demos=None, config=None,
-                                      station_config=station_yaml, quiet=quiet)
-            prepare_skill(args, Path(out) / skill)
+            prepare_skill(learn_arguments(source, station_yaml, quiet), Path(out) / skill)
         if Skill.load(initial).name != skill:
             raise ValueError(f"{initial} holds a '{Skill.load(initial).name}' skill, not '{skill}'; "
                              "use another --out")
         dirs[skill] = initial
     return dirs
+
+
+def learn_arguments(source: str, station_yaml: Path | None = None, quiet: bool = False):
+    """``drake-skill learn --skill SOURCE [--scenario FILE] [--quiet]`` as its parser reads it:
+    every option :func:`~drake_skill.cli.learn.prepare_skill` reads is there, at its default."""
+    import argparse
+
+    from drake_skill.cli.learn import add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    return parser.parse_args(["--skill", str(source), *(["--scenario", str(station_yaml)] if station_yaml else []),
+                              *(["--quiet"] if quiet else [])])
 
 
 def _copy_skill(source: Path, initial: Path, skill: str) -> None:
