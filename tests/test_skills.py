@@ -120,7 +120,8 @@ def test_skills_command_lists_the_shipped_skills_and_checks_a_file(tmp_path):
     listing = subprocess.run([sys.executable, "-m", "drake_skill.cli.main", "skills"], capture_output=True,
                              text=True, check=True).stdout
     assert [line.split()[0] for line in listing.splitlines()[1:5]] == ["close", "draw", "open", "slide"]
-    assert re.search(r"open\s+box_closed\s+3\s+20\s+0.1\s+lid_hinge >= 1.7 after 1 s\s+16", listing)
+    assert re.search(r"open\s+box_closed\s+3\s+20\s+0.1\s+random\s+lid_hinge >= 1.7 after 1 s\s+16", listing)
+    assert re.search(r"draw\s+drawer\s+2\s+9\s+0.1\s+best-return\s+drawer_slide >= 0.1 after 1 s\s+6", listing)
     bad = subprocess.run([sys.executable, "-m", "drake_skill.cli.main", "skills",
                           str(_write(tmp_path, joint="lid_hinge"))], capture_output=True, text=True)
     assert bad.returncode == 2 and "success.joint" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1

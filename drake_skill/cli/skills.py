@@ -25,13 +25,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def table(specs) -> str:
-    """One row per skill: name, scenario, demonstrations, bases, exploration, success rule, keyframes."""
+    """One row per skill: name, scenario, demonstrations, bases, exploration, the start's rule,
+    success rule, keyframes."""
     from drake_skill.station.success import rule_text
 
-    rows = [("skill", "scenario", "demos", "bases", "explore", "success", "keyframes")]
+    rows = [("skill", "scenario", "demos", "bases", "explore", "start", "success", "keyframes")]
     for s in specs:
         rows.append((s.name, s.scenario_path().stem, str(s.demonstrations), str(s.dmp_bases),
-                     f"{s.exploration_scale:g}", rule_text(s.success) + f" after {s.success.settle_time:g} s",
+                     f"{s.exploration_scale:g}", s.initial_dmp,
+                     rule_text(s.success) + f" after {s.success.settle_time:g} s",
                      str(len(s.keyframes)) if s.keyframes else "- (teleoperate)"))
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     return "\n".join("  ".join(v.ljust(w) for v, w in zip(r, widths)).rstrip() for r in rows)
