@@ -4,7 +4,8 @@
     drake-skill skills FILE_OR_NAME    # one skill file, checked, with its fields
 
 A skill is data (docs/skills.md): a YAML file naming its scenario, how many
-demonstrations, DMP bases, exploration scale, gripper opening, success rule
+demonstrations, DMP bases (and columns left unscaled), exploration scale,
+which demonstration policy search starts from, gripper opening, success rule
 and, optionally, the keyframes the scripted demonstrator plays. Every command
 that takes ``--skill`` takes a shipped skill's name or such a file's path.
 """
