@@ -229,7 +229,7 @@ def prepare_skill(args, out: Path) -> Path:
     skill = fit_skill(demos, default_skill_config(spec))
     skill.save(initial, overwrite=True)
     chosen = apply_initial_rule(initial, station_config=_station_config(args, spec),
-                                progress=not getattr(args, "quiet", False))
+                                progress=not args.quiet)
     if chosen:
         print(chosen)
         skill = Skill.load(initial)
