@@ -11,7 +11,8 @@ import pytest
 
 import drake_skill
 from drake_skill.cli.main import main
-from drake_skill.learning.evaluation import CHOICE_SEED0, HELD_OUT_SEED0, apply_initial_rule, best_return_index
+from drake_skill.learning.evaluation import (CHOICE_SEED0, HELD_OUT_SEED0, apply_initial_rule, best_return_index,
+                                            save_fitted_skill)
 from drake_skill.learning.loop import ARTIFACTS
 from drake_skill.learning.plots import plot_outcomes_by_placement
 from drake_skill.learning.runlog import VERSIONED_PACKAGES, read_progress
@@ -239,9 +240,12 @@ def test_best_return_starts_from_the_demonstration_the_learned_reward_rates_best
     spec = dc.replace(skill.spec, initial_dmp="best-return", initial_dmp_poses=1)
     broken = dc.replace(skill, initial_index=1, config=dc.replace(skill.config, spec=spec),
                         dmps=[skill.dmps[0], dc.replace(skill.dmps[1], weights=skill.dmps[1].weights * 1e3)])
-    broken.save(tmp_path / "best")
-    line = apply_initial_rule(tmp_path / "best", station_config=shared["station"], progress=False)
+    lines = []
+    saved = save_fitted_skill(broken, tmp_path / "best", station_config=shared["station"], progress=False,
+                              log=lines.append)
+    [line] = lines
     choice = Skill.load(tmp_path / "best").info["initial_choice"]
+    assert saved.initial_index == 0 and saved.info["initial_choice"] == choice     # the rewritten skill
     assert choice["seeds"] == [CHOICE_SEED0] and choice["executions"] == 2 and choice["seeded_index"] == 1
     assert choice["mean_returns"][1] == 0.0 < choice["mean_returns"][0], choice
     assert choice["index"] == 0 and Skill.load(tmp_path / "best").initial_index == 0
@@ -249,6 +253,7 @@ def test_best_return_starts_from_the_demonstration_the_learned_reward_rates_best
     # The ground truth is recorded beside the choice, one list per DMP.
     assert [len(s) for s in choice["successes"]] == [1, 1]
     random_spec = dc.replace(spec, initial_dmp="random")
-    dc.replace(broken, config=dc.replace(broken.config, spec=random_spec)).save(tmp_path / "random", overwrite=True)
+    kept = dc.replace(broken, config=dc.replace(broken.config, spec=random_spec))
+    assert save_fitted_skill(kept, tmp_path / "random", station_config=shared["station"], log=lines.append) is kept
     assert apply_initial_rule(tmp_path / "random", station_config=shared["station"], progress=False) is None
     assert Skill.load(tmp_path / "random").initial_index == 1

@@ -61,8 +61,8 @@ def run(args: argparse.Namespace) -> int:
 
     from drake_skill.demos.format import load_demonstrations
     from drake_skill.reward.plots import plot_goal_model, plot_return
-    from drake_skill.learning.evaluation import apply_initial_rule
-    from drake_skill.skill import Skill, SkillConfig, _pcae_path, default_skill_config, fit_skill
+    from drake_skill.learning.evaluation import save_fitted_skill
+    from drake_skill.skill import SkillConfig, _pcae_path, default_skill_config, fit_skill
 
     if args.config:  # parse errors and unknown keys before reading the demonstrations
         errors.load_yaml(SkillConfig, args.config, "--config").dmp.validate()
@@ -81,11 +81,7 @@ def run(args: argparse.Namespace) -> int:
     errors.input_file(_pcae_path(config), "pcae_weights", "the PCAE weights (models/pcae.safetensors)")
     print(f"fitting '{config.skill}' from {len(demos)} demonstrations in {args.demos} ...")
     skill = fit_skill(demos, config)
-    skill.save(args.out, overwrite=args.force)
-    chosen = apply_initial_rule(args.out)
-    if chosen:
-        print(chosen)
-        skill = Skill.load(args.out)
+    skill = save_fitted_skill(skill, args.out, overwrite=args.force)
     print(skill.summary())
     plot_goal_model(skill.pomrp, args.out / "goal_model.png", clouds=_state_clouds(skill, demos),
                     title=f"goal model of '{config.skill}'")

@@ -184,7 +184,7 @@ def _save_demos(demos, directory: Path) -> None:
 
 def prepare_skill(args, out: Path) -> Path:
     """The fitted skill's directory: --skill-dir, fitted from --demos, or recorded and fitted."""
-    from drake_skill.learning.evaluation import apply_initial_rule
+    from drake_skill.learning.evaluation import save_fitted_skill
     from drake_skill.skill import Skill, default_skill_config, fit_skill
 
     if args.skill_dir is not None and args.demos is not None:
@@ -227,12 +227,8 @@ def prepare_skill(args, out: Path) -> Path:
         _save_demos(demos, out / "demos")
     print(f"fitting '{name}' from {len(demos)} demonstrations ...")
     skill = fit_skill(demos, default_skill_config(spec))
-    skill.save(initial, overwrite=True)
-    chosen = apply_initial_rule(initial, station_config=_station_config(args, spec),
-                                progress=not args.quiet)
-    if chosen:
-        print(chosen)
-        skill = Skill.load(initial)
+    skill = save_fitted_skill(skill, initial, overwrite=True, station_config=_station_config(args, spec),
+                              progress=not args.quiet)
     print(skill.summary())
     return initial
 

@@ -24,7 +24,7 @@ import numpy as np
 
 __all__ = ["CHOICE_SEED0", "HELD_OUT_SEED0", "apply_initial_rule", "best_return_index", "choose_initial_dmp",
            "evaluate_greedy", "evaluate_skill", "evaluation_table", "exploration_table", "explore_skill",
-           "results_report"]
+           "results_report", "save_fitted_skill"]
 
 #: First seed of the held-out object poses (drake-skill learn and evaluate use the same).
 HELD_OUT_SEED0 = 900_000
@@ -186,6 +186,21 @@ def apply_initial_rule(skill_dir, *, station_config=None, workers: int = 1, prog
     returns = ", ".join(f"DMP {i} {r:.1f}" for i, r in enumerate(c["mean_returns"]))
     return (f"initial DMP: {c['index']} (best mean learned return over {len(c['seeds'])} poses: {returns}; "
             f"the seed drew {c['seeded_index']})")
+
+
+def save_fitted_skill(skill, skill_dir, *, overwrite: bool = False, station_config=None, progress: bool = True,
+                      log: Callable[[str], Any] = print):
+    """Saves a freshly fitted ``skill`` to ``skill_dir`` and applies its skill file's ``initial_dmp``
+    rule (:func:`apply_initial_rule`; ``log`` gets the line saying what it chose). Returns the
+    skill as saved: ``skill`` itself under "random", else the rewritten one."""
+    from drake_skill.skill import Skill
+
+    skill.save(skill_dir, overwrite=overwrite)
+    chosen = apply_initial_rule(skill_dir, station_config=station_config, progress=progress)
+    if chosen is None:
+        return skill
+    log(chosen)
+    return Skill.load(skill_dir)
 
 
 def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0, station_config=None,
