@@ -252,6 +252,8 @@ def test_best_return_starts_from_the_demonstration_the_learned_reward_rates_best
     assert line.startswith("initial DMP: 0 (best mean learned return over 1 poses: DMP 0 ") and "drew 1)" in line
     # The ground truth is recorded beside the choice, one list per DMP.
     assert [len(s) for s in choice["successes"]] == [1, 1]
+    # The rule applied to the saved skill from disk chooses again, with the same seeds and numbers.
+    assert apply_initial_rule(tmp_path / "best", station_config=shared["station"], progress=False) == line
     random_spec = dc.replace(spec, initial_dmp="random")
     kept = dc.replace(broken, config=dc.replace(broken.config, spec=random_spec))
     assert save_fitted_skill(kept, tmp_path / "random", station_config=shared["station"], log=lines.append) is kept

@@ -173,33 +173,42 @@ def choose_initial_dmp(skill_dir, *, poses: int | None = None, station_config=No
     return choice
 
 
+def _chooses_best_return(skill) -> bool:
+    """Whether the skill file's ``initial_dmp`` rule asks for a choice: "best-return" with two
+    or more demonstrations (one DMP leaves nothing to choose)."""
+    return skill.spec.initial_dmp == "best-return" and len(skill.dmps) >= 2
+
+
+def _choice_line(choice: dict[str, Any]) -> str:
+    returns = ", ".join(f"DMP {i} {r:.1f}" for i, r in enumerate(choice["mean_returns"]))
+    return (f"initial DMP: {choice['index']} (best mean learned return over {len(choice['seeds'])} poses: "
+            f"{returns}; the seed drew {choice['seeded_index']})")
+
+
 def apply_initial_rule(skill_dir, *, station_config=None, workers: int = 1, progress: bool = True) -> str | None:
     """The skill file's ``initial_dmp`` rule on a freshly fitted skill: with "best-return",
     :func:`choose_initial_dmp` (a line saying what it chose is returned); with "random" the
     fit's seeded pick stands (None)."""
     from drake_skill.skill import Skill
 
-    skill = Skill.load(skill_dir)
-    if skill.spec.initial_dmp != "best-return" or len(skill.dmps) < 2:
+    if not _chooses_best_return(Skill.load(skill_dir)):
         return None
-    c = choose_initial_dmp(skill_dir, station_config=station_config, workers=workers, progress=progress)
-    returns = ", ".join(f"DMP {i} {r:.1f}" for i, r in enumerate(c["mean_returns"]))
-    return (f"initial DMP: {c['index']} (best mean learned return over {len(c['seeds'])} poses: {returns}; "
-            f"the seed drew {c['seeded_index']})")
+    return _choice_line(choose_initial_dmp(skill_dir, station_config=station_config, workers=workers,
+                                           progress=progress))
 
 
 def save_fitted_skill(skill, skill_dir, *, overwrite: bool = False, station_config=None, progress: bool = True,
                       log: Callable[[str], Any] = print):
     """Saves a freshly fitted ``skill`` to ``skill_dir`` and applies its skill file's ``initial_dmp``
-    rule (:func:`apply_initial_rule`; ``log`` gets the line saying what it chose). Returns the
-    skill as saved: ``skill`` itself under "random", else the rewritten one."""
+    rule (as :func:`apply_initial_rule`, read from ``skill`` in memory; ``log`` gets the line
+    saying what it chose). Returns the skill as saved: ``skill`` itself under "random", else the
+    rewritten one."""
     from drake_skill.skill import Skill
 
     skill.save(skill_dir, overwrite=overwrite)
-    chosen = apply_initial_rule(skill_dir, station_config=station_config, progress=progress)
-    if chosen is None:
+    if not _chooses_best_return(skill):
         return skill
-    log(chosen)
+    log(_choice_line(choose_initial_dmp(skill_dir, station_config=station_config, progress=progress)))
     return Skill.load(skill_dir)
 
 
