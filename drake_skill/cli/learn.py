@@ -70,7 +70,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "goal model's verdict (default dense)")
     search.add_argument("--weighting", choices=("thesis", "range"), default=None,
                         help="rollout weighting of the PI^2 family: thesis (Eq. 5.1, exp(R/C)) or range "
-                             "(exp(h (R - min)/(max - min))); default: the method's")
+                             "(exp(h (R - min)/(max - min))); default: the method's. With --reward sparse "
+                             "use range: Eq. 5.1 weighs a success (R = 1) only e^(1/C) times a failure "
+                             "(1.18 at C = 6 rollouts)")
     search.add_argument("--episodes", type=int, default=None, help="updates (default 5)")
     search.add_argument("--rollouts", type=int, default=None, help="rollouts per update (default 6)")
     search.add_argument("--exploration-scale", type=float, default=None, metavar="S",
