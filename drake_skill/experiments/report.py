@@ -127,8 +127,8 @@ def _ms(values, digits: int = 2) -> str:
 
 @contextlib.contextmanager
 def _without_spread_warnings():
-    """scipy warns of precision loss on a sample whose values are all equal (a cell whose runs
-    all succeed from the start); the callers handle that case."""
+    """scipy warns of precision loss on a sample whose values are all equal (every run of a cell
+    with the same AUC or held-out success, e.g. all 1.00); the callers handle that case."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         yield
