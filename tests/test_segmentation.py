@@ -190,9 +190,12 @@ def test_plane_fit_rejects_a_tilted_plane():
 
 def test_colour_mask_thresholds():
     colours = np.array([BLUE, (20, 50, 150), (40, 70, 200), BROWN, (230, 230, 230), (50, 50, 55),
-                        (200, 225, 250), (0, 0, 0), (5, 10, 30), (30, 175, 60)], dtype=np.uint8)
-    expected = [True, True, True, False, False, False, False, False, False, False]
+                        (200, 225, 250), (0, 0, 0), (5, 10, 30), (30, 175, 60), (3, 5, 10)], dtype=np.uint8)
+    # A shaded blue (5, 10, 30), value 0.12, is the object's colour above the default floor
+    # 0.05 (issue 50); under 0.05 (3, 5, 10), and under the former floor 0.15, it is not.
+    expected = [True, True, True, False, False, False, False, False, True, False, False]
     assert target_colour_mask(colours, SegmentationConfig()).tolist() == expected
+    assert not target_colour_mask(colours[8:9], SegmentationConfig(value_min=0.15))[0]
     reds = SegmentationConfig(hue_min_deg=340.0, hue_max_deg=20.0)   # wraps through 0
     red = np.array([(200, 20, 20), (200, 20, 60), (200, 60, 20), BLUE], dtype=np.uint8)
     assert target_colour_mask(red, reds).tolist() == [True, True, True, False]
@@ -373,8 +376,9 @@ def test_exact_hsv_test_bounds_are_inclusive(fields, colours, expected):
 
 def test_colour_mask_uses_the_top_bits_of_each_channel():
     """Dark versions of the object's blue (the same hue and saturation, half the value) are rejected by
-    value_min; a key built from the wrong bits would look up a darker or brighter colour."""
-    config = SegmentationConfig()
+    value_min (0.15 here, the former default, between the two); a key built from the wrong bits
+    would look up a darker or brighter colour."""
+    config = SegmentationConfig(value_min=0.15)
     colours = np.array([(10, 20, 60), (5, 10, 30), (12, 30, 40), (6, 15, 20)], dtype=np.uint8)
     assert target_colour_mask(colours, config).tolist() == [True, False, True, False]
     with pytest.raises(ValueError) as info:
@@ -659,8 +663,9 @@ def test_missing_returns_raise_no_floating_point_warnings():
 
 
 def test_segment_bounds_table_distance_and_largest_of_two_clusters():
-    """Two blue boxes inside the crop and one beyond it: the larger inside is the object, though the
-    smaller comes first on the image. The columns exactly on workspace_min (the larger box's) and
+    """Two blue boxes inside the crop and one beyond it: under the rule "largest" the larger inside
+    is the object, though the smaller comes first on the image; under "all_regions" (the default)
+    both are. The columns exactly on workspace_min (the larger box's) and
     workspace_max (the smaller's) are inside; a pixel exactly table_distance above the table is table."""
     xyz, rgb, big = _synthetic_scene(yaw=0.0, centre=(0.45, 0.0), size=(0.1, 0.2, 0.1))
     xyz = xyz.astype(np.float64)
@@ -675,6 +680,9 @@ def test_segment_bounds_table_distance_and_largest_of_two_clusters():
     xyz[low, 2] = 0.004
     config = SegmentationConfig(workspace_min=[float(xyz[big, 0].min()), -0.5, -0.05],
                                 workspace_max=[float(xyz[small, 0].max()), 0.5, 0.6], min_points=50, plane_stride=1)
+    both = segment_object(xyz, rgb, [0.0, 0.0, 1.0, 0.0], config, (60, 80))
+    assert np.array_equal(both.indices, np.union1d(big[big != low], small))
+    config.cluster_rule = "largest"
     seg = segment_object(xyz, rgb, [0.0, 0.0, 1.0, 0.0], config, (60, 80))
     assert seg.n_clusters == 2
     assert seg.n_candidates == big.size - 1 + small.size

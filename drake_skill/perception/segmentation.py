@@ -14,7 +14,10 @@ module does the same steps on arrays:
    (world z up), so ``height(p) = [a, b, c] . p + d`` is the signed distance
    above the table [m].
 2. **Colour** (:func:`target_colour_mask`): HSV thresholds (hue range in
-   degrees, minimum saturation and value in [0, 1]); the objects are solid blue.
+   degrees, minimum saturation and value in [0, 1]); the objects are solid
+   blue. The selection rests on hue and saturation; the value floor
+   (``value_min``, default 0.05) only drops pixels too dark for a hue, so a
+   face turned from the light stays in (docs/method.md section 3).
 3. **Crop and table removal** (:func:`segment_object`): keep finite points of
    the target colour inside the axis-aligned workspace box (world frame, m)
    and higher than ``table_distance`` above the plane.
@@ -22,8 +25,12 @@ module does the same steps on arrays:
    image grid, Trevor et al.'s organised connected components with a
    Euclidean comparator: two 4-neighbouring pixels are connected when both
    are kept and their 3-D points are closer than ``cluster_distance``.
-   ``scipy.sparse.csgraph.connected_components`` labels the graph. The
-   largest component is the object.
+   ``scipy.ndimage.label`` labels the graph. Which components are the
+   object is ``cluster_rule`` (:func:`select_regions`): ``"all_regions"``
+   (default) keeps every component of at least ``min_region_fraction`` of
+   the largest one's pixels (a moving part cut off from the base by a
+   shaded strip stays; specks go); ``"largest"`` keeps the largest only
+   (thesis 3.6's rule, which drops such a part).
 5. **Box and pose** (:func:`estimate_box`): the footprint rectangle is
    fitted in the table plane to the points of the lower band of heights
    ``[footprint_min_height, footprint_max_height]`` (the object's base: for
@@ -64,6 +71,8 @@ from drake_skill.common import N_POINTS
 
 __all__ = [
     "BOUNDING_BOX_SIZE",
+    "CLUSTER_RULES",
+    "VALUE_MIN",
     "ObjectBox",
     "FrameResult",
     "Segmentation",
@@ -76,12 +85,20 @@ __all__ = [
     "process_frame",
     "resample_points",
     "segment_object",
+    "select_regions",
     "target_colour_mask",
 ]
 
 
 BOUNDING_BOX_SIZE = 7
 """``[cx, cy, cz, ex, ey, ez, yaw]``: see :class:`ObjectBox`."""
+
+VALUE_MIN = 0.05
+"""Default HSV value floor in [0, 1], for the segmenter and a scenario's ``object.colour``:
+low, so that the colour test rests on hue and saturation (docs/method.md section 3)."""
+
+CLUSTER_RULES = ("all_regions", "largest")
+"""The values of :attr:`SegmentationConfig.cluster_rule` (see :func:`select_regions`)."""
 
 
 @dc.dataclass
@@ -94,7 +111,13 @@ class SegmentationConfig:
     saturation_min, value_min: HSV saturation and value lower bounds in [0, 1].
     table_distance: points at most this high above the table plane are table.
     cluster_distance: largest 3-D gap between 4-neighbouring pixels of a cluster.
-    min_points: the largest cluster must have at least this many points for
+    cluster_rule: which clusters are the object: ``"all_regions"`` every
+      cluster of at least ``min_region_fraction`` of the largest one's pixels,
+      or ``"largest"`` the largest alone (thesis 3.6; with ``value_min`` 0.15
+      it reproduces results from before issue 50).
+    min_region_fraction: under ``"all_regions"``, smaller clusters than this
+      fraction of the largest are specks and dropped, in [0, 1].
+    min_points: the segment must have at least this many points for
       a frame to be valid (fewer: occluded or out of view).
     footprint_min_height, footprint_max_height: band of heights above the
       table whose points define the footprint (object base); ``inf`` as the
@@ -118,9 +141,11 @@ class SegmentationConfig:
     hue_min_deg: float = 200.0
     hue_max_deg: float = 250.0
     saturation_min: float = 0.45
-    value_min: float = 0.15
+    value_min: float = VALUE_MIN
     table_distance: float = 0.004
     cluster_distance: float = 0.03
+    cluster_rule: str = "all_regions"
+    min_region_fraction: float = 0.01
     min_points: int = 1000
     footprint_min_height: float = 0.01
     footprint_max_height: float = 0.12
@@ -154,6 +179,10 @@ class SegmentationConfig:
                      "footprint_min_extent"):
             if not getattr(self, name) > 0:
                 bad(name, getattr(self, name), "a positive length [m]")
+        if self.cluster_rule not in CLUSTER_RULES:
+            bad("cluster_rule", self.cluster_rule, " or ".join(repr(r) for r in CLUSTER_RULES))
+        if not 0.0 <= self.min_region_fraction <= 1.0:
+            bad("min_region_fraction", self.min_region_fraction, "a fraction in [0, 1]")
         if self.min_points < 1:
             bad("min_points", self.min_points, "at least 1")
         if not self.footprint_min_height < self.footprint_max_height:
@@ -385,8 +414,27 @@ def cluster_organised(indices, xyz, image_shape, max_distance: float) -> tuple[i
     return int(n), labels[::2, ::2][cand].astype(np.int32) - 1
 
 
+def select_regions(labels, n_clusters: int, rule: str = "all_regions", min_fraction: float = 0.01) -> np.ndarray:
+    """The candidates that the cluster rule keeps as the object; (K,) bool.
+
+    labels: (K,) cluster labels in 0..n_clusters-1 (:func:`cluster_organised`).
+    ``rule`` ``"largest"``: the largest cluster (the first on a tie).
+    ``"all_regions"``: every cluster with at least ``min_fraction`` times the
+    largest cluster's pixel count (a cluster of exactly that size stays).
+    """
+    labels = np.asarray(labels)
+    if n_clusters <= 1:
+        return np.ones(labels.shape, dtype=bool)
+    sizes = np.bincount(labels, minlength=n_clusters)
+    if rule == "largest":
+        return labels == np.argmax(sizes)
+    if rule != "all_regions":
+        raise ValueError(f"rule: expected one of {CLUSTER_RULES}, got {rule!r}")
+    return (sizes >= min_fraction * sizes.max())[labels]
+
+
 def segment_object(xyz, rgb, plane, config: SegmentationConfig, image_shape) -> Segmentation:
-    """Steps 2-4 of the module docstring: colour, crop, table removal, largest cluster.
+    """Steps 2-4 of the module docstring: colour, crop, table removal, the clusters of ``cluster_rule``.
 
     xyz (P, 3) float [m], rgb (P, 3) uint8, plane (4,) [a, b, c, d];
     image_shape (H, W) with H * W = P. An object that is not visible gives an
@@ -404,8 +452,7 @@ def segment_object(xyz, rgb, plane, config: SegmentationConfig, image_shape) -> 
     idx, p = idx[keep], p[keep]
     n_clusters, labels = cluster_organised(idx, xyz, shape, config.cluster_distance)
     if n_clusters > 1:
-        largest = np.argmax(np.bincount(labels))
-        sel = labels == largest
+        sel = select_regions(labels, n_clusters, config.cluster_rule, config.min_region_fraction)
         idx, p = idx[sel], p[sel]
     return Segmentation(idx, p.astype(np.float64), int(keep.sum()), n_clusters, shape)
 
@@ -548,7 +595,7 @@ def resample_points(points, n_points: int = N_POINTS, seed: "int | np.random.Gen
 class FrameResult:
     """Everything the segmenter computes from one frame.
 
-    valid: the largest cluster has at least ``min_points`` points.
+    valid: the segment (the clusters kept) has at least ``min_points`` points.
     segmentation: the object's pixels and points (before resampling).
     points: (n_points, 3) resampled object cloud [m], world frame (None if not valid).
     box: bounding box and pose (None if not valid).

@@ -221,6 +221,7 @@ def segmenter_config_for_station(station_config, window=None) -> ObjectSegmenter
     colour = obj.colour
     config.segmentation.hue_min_deg, config.segmentation.hue_max_deg = colour.hue_min_deg, colour.hue_max_deg
     config.segmentation.saturation_min, config.segmentation.value_min = colour.saturation_min, colour.value_min
+    config.segmentation.cluster_rule = colour.cluster_rule
     if obj.footprint_heights:
         config.segmentation.footprint_min_height, config.segmentation.footprint_max_height = obj.footprint_heights
     return config.validate()

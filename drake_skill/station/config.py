@@ -33,6 +33,7 @@ from pydrake.systems.sensors import CameraConfig
 from drake_skill import configs
 from drake_skill.common import look_at
 from drake_skill.configs import load_typed
+from drake_skill.perception.segmentation import CLUSTER_RULES, VALUE_MIN
 from drake_skill.station import limits
 
 #: The model instances every station's directives must add (the object's is named in ``object.model``).
@@ -62,13 +63,17 @@ class ColourConfig:
     """The object's colour as the segmenter finds it (HSV; docs/method.md section 3).
 
     hue_min_deg, hue_max_deg: hue range [deg, 0..360); min > max wraps through 0 (reds).
-    saturation_min, value_min: lower bounds in [0, 1].
+    saturation_min, value_min: lower bounds in [0, 1]; value_min's default is the
+      segmenter's (``segmentation.VALUE_MIN``, low: a shaded face keeps its colour).
+    cluster_rule: which colour regions are the object: "all_regions" (every one
+      but specks) or "largest" (thesis 3.6; with value_min 0.15, the rule before issue 50).
     """
 
     hue_min_deg: float = 200.0
     hue_max_deg: float = 250.0
     saturation_min: float = 0.45
-    value_min: float = 0.15
+    value_min: float = VALUE_MIN
+    cluster_rule: str = "all_regions"
 
 
 @dc.dataclass
@@ -370,6 +375,8 @@ def validate_station_config(config: StationConfig) -> StationConfig:
     if c.hue_min_deg == c.hue_max_deg:
         _bad("object.colour.hue_min_deg/hue_max_deg", (c.hue_min_deg, c.hue_max_deg),
              "a hue range that holds the object's colour (min < max, or min > max to wrap through 0)")
+    if c.cluster_rule not in CLUSTER_RULES:
+        _bad("object.colour.cluster_rule", c.cluster_rule, " or ".join(repr(r) for r in CLUSTER_RULES))
     _number("object.joint_damping", obj.joint_damping, 0.0, 100.0, what="a damping")
     _number("object.joint_friction", obj.joint_friction, 0.0, 100.0, what="a friction force/torque")
     _number("object.joint_friction_gain", obj.joint_friction_gain, 0.0, 1e4, lo_open=True, what="a gain")
