@@ -9,7 +9,9 @@ gamepad and press Record / Stop (``drake_skill.demos.teleop``). Writes
 ``OUT/demo_000.npz``, ``demo_001.npz``, ... (format:
 ``drake_skill.demos.format``), ``OUT/demos.json`` (the list of the set) and
 ``OUT/demos.png`` (the demonstrated hand paths in the object frame and the
-object state over time), then prints a table. Existing demo files are never
+object state over time), then prints a table, and a warning naming each
+file whose peak contact force or external joint torque passed 60 % of the
+reflex's limit (``drake_skill.demos.force_margin``). Existing demo files are never
 replaced without ``--force``; with it the whole set is replaced at once
 (an interruption leaves the old set or the new one, never a mix).
 
@@ -159,6 +161,18 @@ def table(rows) -> str:
     return "\n".join(lines)
 
 
+def warn_force_margin(demos, paths, reflex) -> None:
+    """One ``drake-skill: warning:`` line (stderr) per demonstration that pressed over
+    ``drake_skill.demos.force_margin.FORCE_MARGIN`` of a reflex limit, naming its file."""
+    import sys
+
+    from drake_skill.demos.force_margin import margin_warnings
+
+    for path, demo in zip(paths, demos):
+        for message in margin_warnings(demo, reflex, str(path)):
+            print(f"drake-skill: warning: {message}", file=sys.stderr)
+
+
 def record(args) -> int:
     from drake_skill.demos.demonstrator import DemonstratorConfig, load_demonstrator_config
     from drake_skill.demos.format import existing_demo_files, save_demonstrations
@@ -192,6 +206,7 @@ def record(args) -> int:
                                 extra=lambda tmp: _plot(demos, tmp / "demos.png"))
     print(table([(p.name, d) for p, d in zip(paths, demos)]))
     print(f"wrote {len(demos)} demonstration(s) to {args.out}/ and {args.out / 'demos.png'}")
+    warn_force_margin(demos, paths, (station_config or spec.station_config()).reflex)
     return 0 if all(d.success for d in demos) else 1
 
 

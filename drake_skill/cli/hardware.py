@@ -28,7 +28,10 @@ in gravity compensation and light damping; nothing is commanded from here),
 guide the arm by hand for ``--duration`` seconds; the measured hand pose at
 100 Hz and the segmented camera cloud at 10 Hz are added to ``--out`` as its
 next ``demo_NNN.npz``, with the folder's ``demos.json`` updated in the same
-atomic swap (the folder then loads as one set). The demonstration format needs the object's
+atomic swap (the folder then loads as one set); a demonstration whose
+filtered external joint torque passed 60 % of the reflex's
+``external_torque_max`` on a joint gets a one-line warning naming the file,
+the joint, the time and the torque. The demonstration format needs the object's
 state over time (lid angle / drawer travel): it is read from
 SIM_OBJECT_STATE (lcmt_scope), which sim-robot publishes; on a real robot a
 sensor on the hinge or slide must publish it there.
@@ -152,6 +155,7 @@ def _record_demo(args) -> int:
     from pydrake.systems.framework import DiagramBuilder
 
     from drake_skill.cli import errors
+    from drake_skill.cli.demos import warn_force_margin
     from drake_skill.cli.sim_robot import load_config
     from drake_skill.demos.demonstrator import demonstration_from
     from drake_skill.demos.format import append_demonstration, existing_demo_files, load_demonstrations
@@ -218,6 +222,8 @@ def _record_demo(args) -> int:
     path = append_demonstration(demo, args.out)      # demos.json updated in the same swap
     print(f"wrote {path}: {demo.duration:.1f} s, final object state {demo.final_object_state:.3f}, "
           f"{'success' if success else 'failure'}")
+    # The robot measures the external joint torques, not the contact force (0): the torques decide.
+    warn_force_margin([demo], [path], config.station.reflex)
     return 0
 
 

@@ -51,6 +51,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from drake_skill import configs
 from drake_skill.configs import load_typed
 from drake_skill.demos.format import Demonstration, downsample_action, object_frame_poses
+from drake_skill.demos.force_margin import peaks
 from drake_skill.station.pose_source import PosePlan
 from drake_skill.station.recording import ReflexError, StationRecorder, pose_to_vector
 from drake_skill.station.sim.simulation import StationSimulation
@@ -227,7 +228,10 @@ def demonstration_from(recorder: StationRecorder, skill: str, seed: int, X_WO_tr
                        success: bool, metadata: dict) -> Demonstration:
     """Assembles a :class:`~drake_skill.station.recording.StationRecorder`'s samples
     (record_hz, frames at action_hz; with perception, the ObjectSegmenter's
-    points) into a Demonstration (times start at 0)."""
+    points) into a Demonstration (times start at 0). Its metadata gets the
+    reflex monitor's peaks and their times [s]: ``peak_contact_force_N``,
+    ``peak_contact_force_time_s``, ``peak_external_torque_Nm`` (7) and
+    ``peak_external_torque_time_s`` (7) (``drake_skill.demos.force_margin``)."""
     if not recorder.at_frame:
         raise ValueError("recording must end on a camera frame (call sample() until at_frame)")
     if recorder.frame_hz is None:
@@ -248,7 +252,11 @@ def demonstration_from(recorder: StationRecorder, skill: str, seed: int, X_WO_tr
                           X_WO_start=recorder.X_WO_perceived)
         metadata = dict(metadata, X_WO_start_frame=int(recorder.X_WO_frame))
     obj = np.array(recorder.obj)
-    metadata = dict(metadata, peak_contact_force_N=float(np.max(recorder.force)))
+    # The reflex monitor's peaks and their times, for the force margin (drake_skill.demos.force_margin).
+    force, t_force = peaks(times, recorder.force)
+    torque, t_torque = peaks(times, np.reshape(recorder.torque, (-1, 7)))
+    metadata = dict(metadata, peak_contact_force_N=float(force[0]), peak_contact_force_time_s=float(t_force[0]),
+                    peak_external_torque_Nm=torque.tolist(), peak_external_torque_time_s=t_torque.tolist())
     return Demonstration(
         skill=skill, seed=int(seed), success=bool(success), final_object_state=float(obj[-1]),
         times_100hz=times, X_OE_100hz=X_OE_raw, q_100hz=np.array(recorder.q),

@@ -332,10 +332,13 @@ class TeleopSession:
         ``user(t)`` is called before every simulation step with the current
         time (tests drive the sliders and buttons from it). The recording
         lasts at least 1 s (10 samples at 10 Hz) and ends on a camera frame.
-        Raises TimeoutError if Record is not pressed within ``max_wait``.
+        Raises TimeoutError if Record is not pressed within ``max_wait``. A
+        demonstration that pressed near the reflex's limit gets a ``warning:``
+        status line (``drake_skill.demos.force_margin``).
         """
         from drake_skill.demos.format import MIN_SAMPLES
         from drake_skill.demos.demonstrator import demonstration_from
+        from drake_skill.demos.force_margin import margin_warnings
         from drake_skill.station.recording import StationRecorder
         from drake_skill.station.success import judge_run
 
@@ -377,6 +380,8 @@ class TeleopSession:
         demo = demonstration_from(recorder, self.skill, seed, X_WO, success, metadata)
         status(f"recorded {demo.duration:.1f} s: {'success' if success else 'FAILURE'} "
                f"(final object state {demo.final_object_state:.3f})")
+        for message in margin_warnings(demo, self.station.config.reflex, f"this demonstration (seed {seed})"):
+            status(f"warning: {message}")
         return demo
 
 

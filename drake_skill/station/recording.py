@@ -134,10 +134,11 @@ def check_joint_state(state, t: float) -> None:
 
 class StationRecorder:
     """Advances a simulator and samples its station: hand pose, joints, object
-    state and peak (filtered) contact force at ``record_hz``; with ``frame_hz``, camera
-    frames on the same grid (every k-th sample, k = record_hz / frame_hz), the
-    object points, validity and X_WO read from ``segmenter`` (an
-    ``ObjectSegmenter`` wired to the station's cloud in the same diagram).
+    state and peak (filtered) contact force and external joint torques at
+    ``record_hz``; with ``frame_hz``, camera frames on the same grid (every
+    k-th sample, k = record_hz / frame_hz), the object points, validity and
+    X_WO read from ``segmenter`` (an ``ObjectSegmenter`` wired to the
+    station's cloud in the same diagram).
 
     The grid is anchored at a frame time (or, without frames, at the current
     time). Drake handles a discrete update due at time t at the start of the
@@ -149,7 +150,9 @@ class StationRecorder:
     (:class:`~drake_skill.station.reflex.ReflexMonitor`, updated at every plant
     step): when it trips, the simulator returns at that instant and the
     recorder raises :class:`ReflexError` from the monitor's state. A sample's
-    ``force`` is the monitor's peak filtered force over the interval ending at it.
+    ``force`` is the monitor's peak filtered force [N] over the interval ending at it,
+    its ``torque`` (7) the peak of each filtered |external joint torque| [N m] over
+    the same interval (``ReflexMonitor.take_peak`` / ``take_torque_peak``).
     """
 
     def __init__(self, station: StationInterface, root_context, simulator, record_hz: float = 100.0,
@@ -183,10 +186,12 @@ class StationRecorder:
 
     def reset(self) -> None:
         self.times, self.X_WE, self.q, self.obj, self.grip, self.force = [], [], [], [], [], []
+        self.torque = []
         self.points, self.valid = [], []
         self.X_WO_perceived, self.X_WO_frame = None, None
         self._t0 = None
         self._last_peak = 0.0
+        self._last_torque_peak = np.zeros(7)
         self._n = 0
 
     # ------------------------------------------------------------------ grid
@@ -223,8 +228,10 @@ class StationRecorder:
         """Advances to t (and, with ``pending``, handles the events due at t); raises as
         :func:`advance_station`."""
         advance_station(self.simulator, self.station, self.root_context, t, pending)
-        # The peak filtered force over this interval (the reflex monitor's, ReflexMonitor.take_peak).
+        # The peak filtered force and torques over this interval (the reflex monitor's,
+        # ReflexMonitor.take_peak / take_torque_peak).
         self._last_peak = self._monitor.take_peak(self._monitor_context)
+        self._last_torque_peak = self._monitor.take_torque_peak(self._monitor_context)
 
     def sample(self, gripper_command: float = math.nan) -> None:
         """Advances to the next grid time and records it (frames included)."""
@@ -246,6 +253,7 @@ class StationRecorder:
         self.obj.append(float(self._ports["object_state"].Eval(self.context)[0]))
         self.grip.append(float(gripper_command))
         self.force.append(float(self._last_peak))
+        self.torque.append(self._last_torque_peak)
         self._n += 1
 
     def _perceive(self, frame_index: int) -> None:
