@@ -91,7 +91,9 @@ class DemonstratorConfig:
       exceeds this fraction of the collision reflex's limit
       (``StationConfig.reflex.contact_force_max``) is rejected like a failed
       one, as a person who feels the hand press on the object starts again
-      (1: keep every successful one).
+      (1: keep every successful one). One accepted above
+      ``drake_skill.demos.force_margin.FORCE_MARGIN`` (60 %) of the limit is
+      named by a warning when ``drake-skill demos record`` saves it.
     settle_time: the last keyframe is held this long before the recording ends [s]
       (at least the scenario's ``success.settle_time``, the judge's settle phase).
     max_attempts: seeds tried per demonstration before giving up.
