@@ -30,9 +30,9 @@ __all__ = ["CONTACT_FRACTION", "CONTACT_DILATE_S", "position_errors_mm", "contac
            "tracking_error", "total_error", "lag_ms", "contact_shift_mm", "nan_max"]
 
 #: A sample is near contact where |d(object state)/dt| exceeds this fraction of its peak ...
-CONTACT_FRACTION = 0.05
+CONTACT_FRACTION = 0.02
 #: ... dilated by this many seconds on either side [s].
-CONTACT_DILATE_S = 0.1
+CONTACT_DILATE_S = 0.2
 #: Largest time shift :func:`lag_ms` considers, either way [s].
 MAX_LAG_S = 0.5
 
@@ -68,9 +68,10 @@ def contact_mask(times, object_state, fraction: float = CONTACT_FRACTION,
 
     ``times`` (T,) s, ``object_state`` (T,) the object's joint (rad or m).
     A sample is in the mask where ``|d state / dt|`` (``numpy.gradient``) is
-    above ``fraction`` (default 5 %) of its peak over the demonstration; the
-    mask is then dilated by ``dilate_s`` (default 0.1 s) on either side, to
-    take in the approach to the part and the release. An object that never
+    above ``fraction`` (default 2 %) of its peak over the demonstration; the
+    mask is then dilated by ``dilate_s`` (default 0.2 s) on either side, to
+    take in the touch before the part moves and the release after (the
+    rule the fit's near-contact tolerance uses). An object that never
     moves (peak speed below 1e-9 per s) gives an empty mask.
     """
     t = np.asarray(times, dtype=float)

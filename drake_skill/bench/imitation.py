@@ -17,8 +17,8 @@ perception, 100 Hz records). Figures (position only; mm unless said):
                                 sample, no time alignment
   contact_max_mm                the same, max over the samples "near contact":
                                 where the demonstrated object moves
-                                (|d state/dt| > 5 % of its peak, dilated by
-                                0.1 s either side)
+                                (|d state/dt| > 2 % of its peak, dilated by
+                                0.2 s either side)
   lag_ms                        the time shift that best aligns the imitation's
                                 measured path with the demonstration's (least
                                 squares over 10 ms shifts, refined by a
