@@ -2,6 +2,15 @@
 
     drake-skill skills                 # a table of the shipped skills
     drake-skill skills FILE_OR_NAME    # one skill file, checked, with its fields
+    drake-skill skills FILE_OR_NAME --check-camera [--json]
+                                       # does the segment hold the whole object?
+
+``--check-camera`` renders the skill's scenario in simulation with the object's
+joint at ``--joints`` values across its limits on ``--poses`` seeded object
+poses, and reports the least fraction of the object's visible pixels (the
+renderer's label image) that the segment keeps, and where
+(drake_skill/perception/camera_check.py). Run it before recording. ``--json``:
+``{"skill", "kept_fraction_min", "at_joint", "at_pose": [x, y, yaw], "frames"}``.
 
 A skill is data (docs/skills.md): a YAML file naming its scenario, how many
 demonstrations, DMP bases (and columns left unscaled), exploration scale,
@@ -13,6 +22,8 @@ that takes ``--skill`` takes a shipped skill's name or such a file's path.
 from __future__ import annotations
 
 import argparse
+import json
+from pathlib import Path
 
 NAME = "skills"
 HELP = "list the shipped skills, or check and show a skill file"
@@ -23,6 +34,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.add_argument("skill", nargs="?", default=None, metavar="SKILL",
                         help="a shipped skill's name or a skill file to check and show (default: list all)")
+    parser.add_argument("--check-camera", action="store_true",
+                        help="check that the segment keeps the whole object at every joint position")
+    parser.add_argument("--json", action="store_true", help="with --check-camera: print one JSON object")
+    parser.add_argument("--joints", type=int, default=7, metavar="N",
+                        help="with --check-camera: joint positions across the joint's limits (default 7)")
+    parser.add_argument("--poses", type=int, default=3, metavar="N",
+                        help="with --check-camera: seeded object poses (default 3)")
+    parser.add_argument("--seed", type=int, default=0, help="with --check-camera: seed of the first pose")
+    parser.add_argument("--scenario", type=Path, default=None, metavar="FILE",
+                        help="with --check-camera: a scenario YAML over the skill's scenario")
 
 
 def table(specs) -> str:
@@ -44,6 +65,10 @@ def run(args: argparse.Namespace) -> int:
     from drake_skill.cli import errors
     from drake_skill.skills import shipped_skills
 
+    if args.check_camera:
+        return check_camera(args)
+    if args.json:
+        raise ValueError("--json: only with --check-camera")
     if args.skill is None:
         specs = shipped_skills()
         print(table(specs))
@@ -53,6 +78,22 @@ def run(args: argparse.Namespace) -> int:
     spec = errors.skill(args.skill, "SKILL")
     print(table([spec]))
     print(f"  {spec.name}: {spec.description}\n  scenario file: {spec.scenario_path()}")
+    return 0
+
+
+def check_camera(args: argparse.Namespace) -> int:
+    """``--check-camera``: the table, or one JSON object with ``--json``."""
+    from drake_skill.cli import errors
+    from drake_skill.perception import camera_check
+
+    if args.skill is None:
+        raise ValueError("--check-camera: give a skill (a shipped skill's name or a skill file)")
+    if args.joints < 1 or args.poses < 1:
+        raise ValueError(f"--joints {args.joints} / --poses {args.poses}: expected at least 1 each")
+    spec = errors.skill(args.skill, "SKILL")
+    config = errors.station_config(spec, args.scenario)
+    result = camera_check.check_camera(config, spec.name, args.joints, args.poses, args.seed)
+    print(json.dumps(result.summary()) if args.json else camera_check.table(result))
     return 0
 
 
