@@ -40,6 +40,7 @@ import numpy as np
 from pydrake.common.yaml import yaml_dump_typed
 
 from drake_skill.action.dmp import Dmp, DmpConfig, fit_demonstrations
+from drake_skill.action.fitting import FitTolerance, choose_n_basis, contact_mask, fit_errors
 from drake_skill import fileio
 from drake_skill.configs import load_typed
 from drake_skill.perception.features import GoalFeatures, GoalFeaturesConfig
@@ -56,7 +57,16 @@ class SkillConfig:
     skill: the skill's name (``spec.name``).
     spec: the skill file it was fitted for (docs/skills.md): its scenario,
       success rule, exploration scale and gripper opening travel with it.
-    dmp: DMP hyper-parameters (n_basis: the skill file's ``dmp_bases``).
+    dmp: DMP hyper-parameters (n_basis: the skill file's ``dmp_bases``, or
+      chosen from ``dmp_tolerance`` when the skill file leaves it out).
+    dmp_data: which action data the DMPs fit (docs/method.md section 2.2):
+      "100hz" (default), the measured hand pose at the recording rate, whose
+      first samples read the start at rest; "10hz", the 10 Hz samples of
+      thesis 6.3, whose numerical derivative reads a spurious start velocity
+      (skills fitted before 2026-12-06 and the chapter-7 grid).
+    dmp_tolerance: how closely each integrated DMP must follow its
+      demonstration when the skill file leaves ``dmp_bases`` out
+      (``drake_skill.action.fitting.FitTolerance``).
     dmp_ridge: relative ridge of Sigma_b^0 (``drake_skill.action.dmp.exploration_covariance``).
     seed: picks the demonstration whose DMP starts policy search.
     goal_features: PCA size (8).
@@ -72,6 +82,8 @@ class SkillConfig:
     skill: str = ""
     spec: SkillSpec = dc.field(default_factory=SkillSpec)
     dmp: DmpConfig = dc.field(default_factory=DmpConfig)
+    dmp_data: str = "100hz"
+    dmp_tolerance: FitTolerance = dc.field(default_factory=FitTolerance)
     dmp_ridge: float = 0.1
     seed: int = 0
     goal_features: GoalFeaturesConfig = dc.field(default_factory=GoalFeaturesConfig)
@@ -81,14 +93,40 @@ class SkillConfig:
 
 
 CLOUD_FRAMES = ("object", "world")
+DMP_DATA = ("100hz", "10hz")
+#: The names of the vector DMP's weight columns (docs/method.md section 2).
+DMP_COLUMNS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 
 
-def default_skill_config(skill) -> SkillConfig:
+#: How a skill's DMPs are fitted (docs/method.md section 2.2): "tolerance" (the
+#: default) or "thesis", the fit of the chapter-7 grid (thesis 6.3 and Table 6.1).
+FITS = ("tolerance", "thesis")
+#: Thesis Table 6.1's bases (Draw: its real-robot value); a skill the thesis
+#: does not have keeps its skill file's ``dmp_bases``, else THESIS_DMP_BASES_OTHER.
+THESIS_DMP_BASES = {"open": 20, "close": 10, "draw": 9}
+THESIS_DMP_BASES_OTHER = 10
+
+
+def default_skill_config(skill, fit: str = "tolerance") -> SkillConfig:
     """SkillConfig of a skill (a shipped skill's name, a skill file or a SkillSpec),
-    with the skill file's number of DMP bases and unscaled DMP columns."""
+    with the skill file's number of DMP bases (if it fixes one) and unscaled DMP columns.
+
+    ``fit = "thesis"``: the fit of the committed chapter-7 grid instead: the
+    10 Hz action data, Table 6.1's bases and the amplitude rule for scaled
+    columns (docs/method.md section 2.2).
+    """
+    if fit not in FITS:
+        raise ValueError(f"fit: {fit!r}; expected one of {', '.join(FITS)}")
     spec = load_skill(skill)
-    return SkillConfig(skill=spec.name, spec=spec, dmp=DmpConfig(n_basis=int(spec.dmp_bases),
-                                                                unscaled_dims=[int(i) for i in spec.dmp_unscaled_dims]))
+    dmp = DmpConfig(unscaled_dims=[int(i) for i in spec.dmp_unscaled_dims])
+    if fit == "thesis":
+        bases = THESIS_DMP_BASES.get(spec.name, spec.dmp_bases or THESIS_DMP_BASES_OTHER)
+        spec = dc.replace(spec, dmp_bases=int(bases))
+        dmp = dc.replace(dmp, scale_rule="amplitude")
+        return SkillConfig(skill=spec.name, spec=spec, dmp=dc.replace(dmp, n_basis=int(bases)), dmp_data="10hz")
+    if spec.dmp_bases is not None:
+        dmp.n_basis = int(spec.dmp_bases)
+    return SkillConfig(skill=spec.name, spec=spec, dmp=dmp)
 
 
 def _pcae_path(config: SkillConfig) -> Path:
@@ -240,6 +278,39 @@ class Skill:
                 for r, ok in zip(self.info["demo_returns"], self.info["demo_verdicts"])),
         ]
         return "\n".join(lines)
+
+    def fit_report(self) -> tuple[list[str], list[str]]:
+        """``(lines, warnings)`` on the DMP fit (docs/method.md section 2.2): B and how it was
+        chosen, each demonstration's fit error, the scaled columns; a warning for a
+        demonstration that misses the tolerance or never moves the object. Empty for
+        skills fitted before the report existed."""
+        report = self.info.get("dmp_fit")
+        if not report:
+            return [], []
+        tol = report["tolerance"]
+        lines = [f"DMP: B = {report['n_basis']} bases ({report['how']}; tolerance {tol['contact_max_mm']:g} mm "
+                 f"near contact, {tol['rms_mm']:g} mm RMS), fitted to the {report['data']} action data"]
+        warnings = []
+        for e in report["errors"]:
+            lines.append(f"  {e['demo']}: fit error max {e['fit_max_mm']:.1f} mm, RMS {e['fit_rms_mm']:.1f} mm, "
+                         f"near contact {e['fit_contact_max_mm']:.1f} mm ({e['contact_samples']} samples)")
+            if e["fit_rms_mm"] > tol["rms_mm"] or e["fit_contact_max_mm"] > tol["contact_max_mm"]:
+                warnings.append(f"{e['demo']}: the DMP misses it by {e['fit_contact_max_mm']:.1f} mm near contact "
+                                f"and {e['fit_rms_mm']:.1f} mm RMS, more than the tolerance; remove dmp_bases "
+                                "from the skill file to choose B from the tolerance")
+            if e["contact_samples"] == 0 and report.get("object_state_known", True):
+                warnings.append(f"{e['demo']}: the object's joint never moves in it (no contact); check that "
+                                "the demonstration touches the object, or record it again")
+        names = DMP_COLUMNS if self.config.dmp.quaternion == "vector" else ("x", "y", "z", "rx", "ry", "rz")
+        scaled = [names[int(k)] for k, why in report["scaled"].items() if why == "scaled"]
+        kept = [names[int(k)] for k, why in report["scaled"].items() if why == "via point outside span"]
+        if report.get("start_join_s"):
+            lines.append(f"a start away from the demonstrated one joins the demonstrated path within "
+                         f"{report['start_join_s']:.2f} s, before the first contact")
+        lines.append("scaled by g - y0: " + (", ".join(scaled) or "none")
+                     + ("; not scaled, their via points outside the start-goal span stay put in the object "
+                        "frame: " + ", ".join(kept) if kept else ""))
+        return lines, warnings
 
     # ------------------------------------------------------------ save/load
     def save(self, directory, overwrite: bool = False) -> Path:
@@ -511,13 +582,8 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
             raise ValueError(f"{name}: {n} frames at 10 Hz, fewer than the goal model's smallest state count "
                              f"(pomrp.goal_model.n_states_min = {k_min}); record a longer demonstration "
                              "or lower n_states_min")
-        if n < int(config.dmp.n_basis):
-            raise ValueError(f"{name}: {n} frames at 10 Hz, fewer than the {config.dmp.n_basis} DMP bases "
-                             "(dmp.n_basis); record a longer demonstration or use fewer bases")
 
-    fit = fit_demonstrations([(d.times, d.X_OE) for d in demos], config.dmp,
-                             seed=config.seed, ridge=config.dmp_ridge)
-    config = dc.replace(config, dmp=fit.config)  # with the scaled columns chosen by the fit
+    fit, config, dmp_fit = _fit_action(demos, config)
 
     from drake_skill.perception.pcae import load_pcae
     weights = _pcae_path(config)
@@ -539,9 +605,107 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
         "demo_names": [str(getattr(d, "metadata", {}).get("file", f"demo {i}"))
                        if isinstance(getattr(d, "metadata", None), dict) else f"demo {i}"
                        for i, d in enumerate(demos)],
+        "dmp_fit": dmp_fit,
     }
     opening = config.spec.gripper_opening
     skill = Skill(config, fit.dmps, fit.initial_index, fit.sigma0, pca, pomrp, weights, info,
                   gripper_opening(demos) if opening is None else float(opening))
     skill._encoder = encoder
     return skill
+
+
+def _demo_names(demos: Sequence) -> list[str]:
+    """Each demonstration's file (its name in the recorded set), else ``demo i``."""
+    names = []
+    for i, d in enumerate(demos):
+        meta = getattr(d, "metadata", None)
+        name = getattr(d, "path", None) or (meta.get("file") if isinstance(meta, dict) else None)
+        names.append(str(name) if name else f"demo {i}")
+    return names
+
+
+def _action_data(demos: Sequence, config: SkillConfig) -> tuple[list, list]:
+    """Per demonstration, the ``(times, X_OE)`` the DMPs fit and the near-contact mask on those times."""
+    if config.dmp_data not in DMP_DATA:
+        raise ValueError(f"config.dmp_data: {config.dmp_data!r}; expected one of {', '.join(DMP_DATA)}")
+    data, masks = [], []
+    for i, d in enumerate(demos):
+        name = getattr(d, "path", None) or f"demos[{i}]"
+        if config.dmp_data == "100hz":
+            if getattr(d, "times_100hz", None) is None or getattr(d, "X_OE_100hz", None) is None:
+                raise ValueError(f"{name}: no 100 Hz action data (times_100hz, X_OE_100hz); record it again "
+                                 "or fit the 10 Hz samples with dmp_data: 10hz")
+            data.append((d.times_100hz, d.X_OE_100hz))
+        else:
+            data.append((d.times, d.X_OE))
+        state = getattr(d, "object_state_100hz", None)
+        mask = np.zeros(len(data[-1][0]), dtype=bool)
+        if state is not None and getattr(d, "times_100hz", None) is not None:
+            full = contact_mask(d.times_100hz, state)
+            mask = np.interp(data[-1][0], d.times_100hz, full.astype(float)) > 0.5
+        masks.append(mask)
+    return data, masks
+
+
+#: The start offset fades out within this fraction of the time to the first contact.
+START_JOIN_FRACTION = 0.8
+
+
+def _start_join(data: Sequence, masks: Sequence) -> float:
+    """``DmpConfig.start_join`` [s]: START_JOIN_FRACTION of the earliest first contact over the
+    demonstrations (docs/method.md section 2.1); 0 (the spring's transient) when none touches."""
+    firsts = [float(t[m][0] - t[0]) for (t, _), m in zip(data, masks) if np.any(m)]
+    return round(START_JOIN_FRACTION * min(firsts), 3) if firsts else 0.0
+
+
+def _fit_action(demos: Sequence, config: SkillConfig):
+    """The DMP fits (docs/method.md section 2.2): B from the skill file or from the tolerance.
+
+    Returns ``(DemonstrationFit, config with the fitted DmpConfig, report)``;
+    the report (for skill.json and ``drake-skill fit``) holds B, how it was
+    chosen, each demonstration's fit error and whether the tolerance is met.
+    Raises ValueError when no B up to the cap meets the tolerance, naming
+    the best error reached.
+    """
+    data, masks = _action_data(demos, config)
+    names = _demo_names(demos)
+
+    def fit_with(n_basis: int):
+        f = fit_demonstrations(data, dc.replace(config.dmp, n_basis=int(n_basis)), seed=config.seed,
+                               ridge=config.dmp_ridge)
+        return f.dmps, f.config
+
+    tolerance = config.dmp_tolerance
+    fixed = config.spec.dmp_bases is not None
+    shortest = min(len(t) for t, _ in data)
+    if fixed or config.spec.name == "":
+        n = int(config.dmp.n_basis)
+        if n > shortest:
+            raise ValueError(f"{names[int(np.argmin([len(t) for t, _ in data]))]}: {shortest} samples, fewer than "
+                             f"the {n} DMP bases (dmp.n_basis); record a longer demonstration or use fewer bases")
+        dmps, dmp_config = fit_with(n)
+        errors = [fit_errors(d, dmp_config, t, p, m) for d, (t, p), m in zip(dmps, data, masks)]
+        met = all(tolerance.met_by(e) for e in errors)
+        how = "fixed by the skill file (dmp_bases)"
+    else:
+        choice = choose_n_basis(fit_with, data, masks, tolerance)
+        n, errors, met = choice.n_basis, choice.errors, choice.met
+        if not met:
+            worst = max(errors, key=lambda e: (e.contact_max_mm, e.rms_mm))
+            who = names[errors.index(worst)]
+            raise ValueError(
+                f"{who}: no number of DMP bases up to {min(tolerance.max_bases, shortest)} fits it within "
+                f"{tolerance.contact_max_mm:g} mm near contact and {tolerance.rms_mm:g} mm RMS (best: "
+                f"{worst.contact_max_mm:.1f} mm near contact, {worst.rms_mm:.1f} mm RMS at B = {n}); record a "
+                "longer, smoother demonstration, or set dmp_bases in the skill file to accept the error")
+        how = "the fewest that meet the tolerance"
+    join = _start_join(data, masks) if config.dmp_data != "10hz" else 0.0
+    fit = fit_demonstrations(data, dc.replace(config.dmp, n_basis=n, start_join=join), seed=config.seed,
+                             ridge=config.dmp_ridge)
+    known = all(np.all(np.isfinite(getattr(d, "object_state_100hz", [np.nan]))) for d in demos)
+    report = {"n_basis": n, "how": how, "data": config.dmp_data, "tolerance_met": bool(met),
+              "object_state_known": bool(known),
+              "tolerance": {"contact_max_mm": tolerance.contact_max_mm, "rms_mm": tolerance.rms_mm},
+              "errors": [dict(e.as_dict(), demo=names[i]) for i, e in enumerate(errors)],
+              "scaled": {str(k): v for k, v in fit.scale_reasons.items()}, "start_join_s": join}
+    return fit, dc.replace(config, dmp=fit.config), report

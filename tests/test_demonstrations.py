@@ -246,8 +246,12 @@ def test_demonstrations_too_short_for_the_goal_model_name_the_file(tmp_path):
     with pytest.raises(ValueError, match=r"demo_000\.npz: 13 frames at 10 Hz, fewer than the goal model's "
                                          r"smallest state count \(pomrp\.goal_model\.n_states_min = 20\)"):
         fit_skill(demos, config)
-    config = SkillConfig(skill="open")  # 20 DMP bases for 13 frames
-    with pytest.raises(ValueError, match=r"demo_000\.npz: 13 frames at 10 Hz, fewer than the 20 DMP bases"):
+    config = SkillConfig(skill="open", dmp_data="10hz")  # 20 DMP bases for 13 samples at 10 Hz
+    with pytest.raises(ValueError, match=r"demo_000\.npz: 13 samples, fewer than the 20 DMP bases"):
+        fit_skill(demos, config)
+    config = SkillConfig(skill="open")   # the 100 Hz data: 121 samples
+    config.dmp.n_basis = 200
+    with pytest.raises(ValueError, match=r"demo_000\.npz: 121 samples, fewer than the 200 DMP bases"):
         fit_skill(demos, config)
 
 

@@ -58,7 +58,7 @@ def test_ports_and_no_direct_feedthrough(dmp):
     assert system.get_input_port(0).get_name() == "X_WO"
     assert [system.get_output_port(i).get_name() for i in range(2)] == ["X_WE_desired", "phase"]
     assert not system.HasAnyDirectFeedthrough()
-    assert system.num_numeric_parameter_groups() == 4
+    assert system.num_numeric_parameter_groups() == 5   # weights, y0, goal, tau, y0_demo
     assert system.get_weights(system.CreateDefaultContext()).shape == (10, 7)
 
 

@@ -32,8 +32,29 @@ def close_data():
 
 @pytest.fixture(scope="module")
 def close_skill(close_data):
+    """The thesis's fit (10 Hz data, Table 6.1's 10 bases), whose structure the tests below check."""
     demos, _, _ = close_data
-    return fit_skill(demos, default_skill_config("close"))
+    return fit_skill(demos, default_skill_config("close", fit="thesis"))
+
+
+def test_default_fit_chooses_the_bases_that_meet_the_tolerance(close_data):
+    """docs/method.md section 2.2: the 100 Hz data, the fewest bases of the ladder that reproduce
+    each demonstration within 2 mm near contact and 3 mm RMS, reported for skill.json and fit."""
+    from drake_skill.action.fitting import BASIS_LADDER
+
+    demos, _, _ = close_data
+    config = default_skill_config("close")
+    assert config.spec.dmp_bases is None and config.dmp_data == "100hz"
+    skill = fit_skill(demos, config)
+    report = skill.info["dmp_fit"]
+    assert report["tolerance_met"] and report["n_basis"] == skill.config.dmp.n_basis in BASIS_LADDER
+    assert report["n_basis"] > 10 and skill.initial_weights.shape == (report["n_basis"], 7)
+    for e in report["errors"]:
+        assert e["fit_rms_mm"] <= 3.0 and e["fit_contact_max_mm"] <= 2.0 and e["contact_samples"] > 0
+    assert 0 < skill.config.dmp.start_join < skill.initial_dmp.tau
+    lines, warnings = skill.fit_report()
+    assert lines[0].startswith(f"DMP: B = {report['n_basis']} bases (the fewest that meet the tolerance")
+    assert len(lines) == 1 + len(demos) + 2 and warnings == []
 
 
 def test_fitted_skill_has_thesis_structure(close_skill):

@@ -37,7 +37,9 @@ Equations (one controlled dimension; all dimensions share the phase):
   scaling, as movement_primitives and others do) in the others.
   :func:`fit_demonstrations` fills ``scaled_dims`` with the columns where
   every demonstration moves by at least ``DmpConfig.scale_threshold``
-  (5 cm / 0.05) and that ``DmpConfig.unscaled_dims`` does not exclude:
+  (5 cm / 0.05), whose path stays within its start-goal span
+  (``scale_rule = "span"``, :func:`scale_choice`) and that
+  ``DmpConfig.unscaled_dims`` does not exclude:
   those keep the thesis's spatial scaling toward a new start, the
   nearly-still ones (a lift that returns to its height, a quaternion
   component) are not scaled. Both are continuous in ``y0``: an unscaled
@@ -135,6 +137,7 @@ __all__ = [
     "fit_weights",
     "fit_dmp",
     "fit_demonstrations",
+    "scale_choice",
     "initial_weights",
     "exploration_covariance",
     "default_times",
@@ -151,6 +154,11 @@ MAX_DURATION_S = 3600.0
 MAX_INTEGRATION_STEPS = 2_000_000
 _QUATERNION_MODES = ("vector", "ude")
 _REGRESSIONS = ("lwr", "least_squares")
+_SCALE_RULES = ("span", "amplitude")
+#: A path may leave its start-goal span by this fraction of the span (and at
+#: least SPAN_MARGIN_MIN) and still count as within it (scale_rule "span").
+SPAN_MARGIN_FRACTION = 0.1
+SPAN_MARGIN_MIN = 0.01
 
 
 @dataclass
@@ -196,6 +204,18 @@ class DmpConfig:
     #: (Draw's hook behind the handle, docs/method.md section 2) keeps its
     #: place in the object frame instead of stretching with g - y0.
     unscaled_dims: list[int] = field(default_factory=list)
+    #: How fit_demonstrations picks ``scaled_dims`` (docs/method.md section 2.1):
+    #: "span" scales a column only where every demonstration moves by at least
+    #: ``scale_threshold`` *and* its path stays within its start-goal span (a
+    #: via point outside the span stays put in the object frame); "amplitude"
+    #: looks at the amplitude alone (skills fitted before 2026-12-06).
+    scale_rule: str = "span"
+    #: Time [s] in which an unscaled column's start offset ``y0 - y0_demo``
+    #: fades out (minimum jerk), so that the path joins the demonstrated one
+    #: before contact (docs/method.md section 2.1); 0: the spring's own
+    #: transient ``(y0 - y0_demo)(1 - K s(t))``, which lasts about tau / 2.
+    #: ``drake-skill fit`` sets it from the demonstrations' first contact.
+    start_join: float = 0.0
 
     def validate(self) -> "DmpConfig":
         """Raises ValueError naming the first bad field; returns self."""
@@ -217,6 +237,11 @@ class DmpConfig:
                    for i in dims) or len(set(dims)) != len(dims):
                 raise ValueError(f"DmpConfig.{name}: expected distinct weight columns in [0, {self.weight_dim}), "
                                  f"got {dims!r}")
+        if self.scale_rule not in _SCALE_RULES:
+            raise ValueError(f"DmpConfig.scale_rule: expected one of {_SCALE_RULES}, got {self.scale_rule!r}")
+        if not (isinstance(self.start_join, (int, float)) and math.isfinite(self.start_join)
+                and self.start_join >= 0):
+            raise ValueError(f"DmpConfig.start_join: expected a finite time >= 0 s, got {self.start_join!r}")
         if not math.isfinite(self.scale_threshold):
             raise ValueError(f"DmpConfig.scale_threshold: expected a finite value, got {self.scale_threshold!r}")
         return self
@@ -239,12 +264,20 @@ class Dmp:
     y0: np.ndarray
     goal: np.ndarray
     tau: float
+    #: The demonstrated start (7,) the weights were fitted from; None: ``y0``.
+    #: With ``DmpConfig.start_join`` the unscaled columns join the demonstrated
+    #: path from a start that differs from it (docs/method.md section 2.1).
+    y0_demo: np.ndarray | None = None
 
     def __post_init__(self):
         self.weights = np.array(self.weights, dtype=float)
         self.y0 = np.array(self.y0, dtype=float)
         self.goal = np.array(self.goal, dtype=float)
         self.tau = float(self.tau)
+        if self.y0_demo is not None:
+            self.y0_demo = np.array(self.y0_demo, dtype=float)
+            if self.y0_demo.shape != (POSE_DIM,) or not np.all(np.isfinite(self.y0_demo)):
+                raise ValueError(f"Dmp.y0_demo: expected a finite pose of shape (7,), got {self.y0_demo.shape}")
         if self.weights.ndim != 2 or self.weights.shape[1] not in (6, 7) or self.weights.shape[0] < 2:
             raise ValueError(f"Dmp.weights: expected shape (B >= 2, 7 or 6), got {self.weights.shape}")
         for name in ("y0", "goal"):
@@ -270,14 +303,26 @@ class Dmp:
     def n_basis(self) -> int:
         return self.weights.shape[0]
 
+    @property
+    def demonstrated_start(self) -> np.ndarray:
+        """``y0_demo``, or ``y0`` when the DMP carries none."""
+        return self.y0 if self.y0_demo is None else self.y0_demo
+
+    def with_start(self, y0) -> "Dmp":
+        """The same DMP started from ``y0`` (7,), keeping its demonstrated start."""
+        return Dmp(weights=self.weights, y0=y0, goal=self.goal, tau=self.tau, y0_demo=self.demonstrated_start)
+
     def to_arrays(self, prefix: str = "") -> dict[str, np.ndarray]:
         """Numeric arrays for ``fileio.atomic_save_npz``."""
-        return {
+        out = {
             f"{prefix}weights": self.weights,
             f"{prefix}y0": self.y0,
             f"{prefix}goal": self.goal,
             f"{prefix}tau": np.array(self.tau),
         }
+        if self.y0_demo is not None:
+            out[f"{prefix}y0_demo"] = self.y0_demo
+        return out
 
     @classmethod
     def from_arrays(cls, arrays, prefix: str = "") -> "Dmp":
@@ -288,6 +333,7 @@ class Dmp:
                 y0=arrays[f"{prefix}y0"],
                 goal=arrays[f"{prefix}goal"],
                 tau=float(np.asarray(arrays[f"{prefix}tau"])),
+                y0_demo=arrays[f"{prefix}y0_demo"] if f"{prefix}y0_demo" in arrays else None,
             )
         except KeyError as e:
             raise ValueError(f"arrays: missing DMP entry {e.args[0]!r}") from e
@@ -495,7 +541,7 @@ def fit_dmp(times, poses, config: DmpConfig | None = None, *, quaternion_referen
     y0, goal = y[0].copy(), y[-1].copy()
     if config.quaternion == "vector":
         w = _regress(t, _f_target(t, y, goal, tau, config), forcing_amplitude(y0, goal, config), tau, config)
-        return Dmp(weights=w, y0=y0, goal=goal, tau=tau)
+        return Dmp(weights=w, y0=y0, goal=goal, tau=tau, y0_demo=y0)
     a = forcing_amplitude(y0, goal, config)
     w_pos = _regress(t, _f_target(t, y[:, :3], goal[:3], tau, config), a[:3], tau, config)
     # Ude et al. 2014, Eq. 24-25: f_o = tau^2 domega - K 2 log(g * conj(q)) + D tau omega.
@@ -505,7 +551,7 @@ def fit_dmp(times, poses, config: DmpConfig | None = None, *, quaternion_referen
     err = 2.0 * quat_log(quat_multiply(goal[3:], quat_conjugate(q)))
     f_rot = tau * tau * domega - config.K * err + config.D * tau * omega
     w_rot = _regress(t, f_rot, a[3:], tau, config)
-    return Dmp(weights=np.concatenate([w_pos, w_rot], axis=1), y0=y0, goal=goal, tau=tau)
+    return Dmp(weights=np.concatenate([w_pos, w_rot], axis=1), y0=y0, goal=goal, tau=tau, y0_demo=y0)
 
 
 @dataclass
@@ -523,6 +569,8 @@ class DemonstrationFit:
     ridge: float = field(default=0.0)
     #: The DmpConfig the fits used (``scaled_dims`` filled in); execute them with it.
     config: DmpConfig | None = None
+    #: Why each weight column is scaled or not (:func:`scale_choice`); empty when not chosen.
+    scale_reasons: dict = field(default_factory=dict)
 
     @property
     def initial(self) -> Dmp:
@@ -559,19 +607,56 @@ def fit_demonstrations(
             reference = checked[0, 3:]
         checked[:, 3:] = make_quaternions_continuous(checked[:, 3:], reference=reference)
         checked_demos.append((times, checked))
+    reasons: dict[int, str] = {}
     if not config.scale_by_amplitude and config.scale_threshold > 0:
-        # Columns every demonstration moves along by at least the threshold keep the
-        # thesis's spatial scaling; the others are not scaled (module docstring).
-        amplitudes = np.stack([np.abs(forcing_amplitude(p[0], p[-1], DmpConfig(
-            quaternion=config.quaternion, scale_by_amplitude=True, amplitude_floor=1e-300)))
-            for _, p in checked_demos])
-        dims = [int(i) for i in np.flatnonzero(np.all(amplitudes >= config.scale_threshold, axis=0))
-                if i not in config.unscaled_dims]
+        reasons = scale_choice([p for _, p in checked_demos], config)
+        dims = [i for i, why in reasons.items() if why == "scaled"]
         config = dataclasses.replace(config, scaled_dims=dims).validate()
     dmps = [fit_dmp(t, p, config) for t, p in checked_demos]   # quaternions already on the reference's side
     index, _ = initial_weights(dmps, seed)
     return DemonstrationFit(dmps=dmps, initial_index=index, sigma0=exploration_covariance(dmps, ridge, floor),
-                            ridge=ridge, config=config)
+                            ridge=ridge, config=config, scale_reasons=reasons)
+
+
+def scale_choice(paths: Sequence[np.ndarray], config: DmpConfig) -> dict[int, str]:
+    """Why each weight column is or is not scaled by ``g - y0`` (docs/method.md section 2.1).
+
+    ``paths``: each demonstration's poses (T, 7), quaternions continuous.
+    Returns {column: reason}, reason one of "scaled", "unscaled_dims" (the
+    skill file says so), "moves < threshold" (some demonstration moves less
+    than ``scale_threshold`` along it) and, with ``scale_rule = "span"``,
+    "via point outside span": some demonstration's path leaves
+    ``[min(y0, g) - m, max(y0, g) + m]`` with ``m = max(SPAN_MARGIN_MIN,
+    SPAN_MARGIN_FRACTION |g - y0|)`` (m, or unitless for a quaternion
+    component). Stretching by ``(g - y0) / (g - y0_demo)`` keeps a point in
+    place in the object frame only between start and goal; a point beyond
+    them moves with the start, so those columns are left unscaled. The
+    "span" test applies to the position columns and, in the vector
+    formulation, to the quaternion components alike; with "ude" the
+    rotation columns keep the amplitude rule (a rotation vector has no span
+    along the path).
+    """
+    amp_config = DmpConfig(quaternion=config.quaternion, scale_by_amplitude=True, amplitude_floor=1e-300)
+    amplitudes = np.stack([np.abs(forcing_amplitude(p[0], p[-1], amp_config)) for p in paths])
+    span_dims = range(POSE_DIM if config.quaternion == "vector" else 3)
+    reasons = {}
+    for i in range(config.weight_dim):
+        if i in config.unscaled_dims:
+            reasons[i] = "unscaled_dims"
+        elif not np.all(amplitudes[:, i] >= config.scale_threshold):
+            reasons[i] = "moves < threshold"
+        elif config.scale_rule == "span" and i in span_dims and not all(_within_span(p[:, i]) for p in paths):
+            reasons[i] = "via point outside span"
+        else:
+            reasons[i] = "scaled"
+    return reasons
+
+
+def _within_span(values: np.ndarray) -> bool:
+    """True when a column's path stays within its start-goal span (with the margin of :func:`scale_choice`)."""
+    lo, hi = sorted((float(values[0]), float(values[-1])))
+    margin = max(SPAN_MARGIN_MIN, SPAN_MARGIN_FRACTION * (hi - lo))
+    return bool(values.min() >= lo - margin and values.max() <= hi + margin)
 
 
 def initial_weights(dmps: Sequence[Dmp], seed: int) -> tuple[int, np.ndarray]:
@@ -780,10 +865,13 @@ def integrate(
     g_rows = _rows(g_op, idx, frac)  # (T, B)
     s_rows = _rows(s_op, idx, frac)  # (T,)
     a = forcing_amplitude(dmp.y0, dmp.goal, config)
+    join = _start_join(dmp, config, t, s_rows)
     if config.quaternion == "vector":
         # y(t) = y0 + K s(t) (g - y0) + G(t) (W * a): one matmul for the batch.
         y = _apply(g_rows, w * a)
         y += dmp.y0 + config.K * s_rows[:, None] * (dmp.goal - dmp.y0)
+        if join is not None:
+            y += join
         if normalize_quaternion:
             q = y[..., 3:]
             norm = np.sqrt(np.einsum("...i,...i->...", q, q))
@@ -794,8 +882,36 @@ def integrate(
         return y
     pos = _apply(g_rows, w[..., :3] * a[:3])
     pos += dmp.y0[:3] + config.K * s_rows[:, None] * (dmp.goal[:3] - dmp.y0[:3])
+    if join is not None:
+        pos += join[:, :3]
     q = _integrate_ude_orientation(dmp, w[..., 3:] * a[3:], config, h, n, idx, frac)
     return np.concatenate([pos, q], axis=-1)
+
+
+def _start_join(dmp: Dmp, config: DmpConfig, t: np.ndarray, s_rows: np.ndarray) -> np.ndarray | None:
+    """What ``DmpConfig.start_join`` adds to the path (T, 7), or None when nothing.
+
+    In a column that is not scaled, the start offset ``d = y0 - y0_demo``
+    enters the path as ``d (1 - K s(t))``, the spring's transient. With
+    ``start_join = T_j`` it enters as ``d (1 - m(t / T_j))`` instead, ``m``
+    the minimum-jerk ramp ``10 u^3 - 15 u^4 + 6 u^5`` (zero velocity and
+    acceleration at both ends): from ``t = T_j`` on the path is the one
+    fitted to the demonstration, so a via point after ``T_j`` stays where it
+    was shown in the object frame. The returned term is the difference of the
+    two; only position columns (and quaternion components in the vector
+    formulation) that are not scaled are touched.
+    """
+    if config.start_join <= 0 or dmp.y0_demo is None or config.scale_by_amplitude:
+        return None
+    offset = dmp.y0 - dmp.y0_demo
+    columns = [i for i in range(POSE_DIM if config.quaternion == "vector" else 3) if i not in config.scaled_dims]
+    if not columns or not np.any(offset[columns]):
+        return None
+    u = np.clip(t / config.start_join, 0.0, 1.0)
+    fade = 1.0 - (10 * u**3 - 15 * u**4 + 6 * u**5)
+    out = np.zeros((t.size, POSE_DIM))
+    out[:, columns] = (fade - (1.0 - config.K * s_rows))[:, None] * offset[columns]
+    return out
 
 
 def _integrate_ude_orientation(dmp: Dmp, wa: np.ndarray, config: DmpConfig, h, n, idx, frac) -> np.ndarray:

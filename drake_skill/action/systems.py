@@ -65,6 +65,7 @@ class DmpSystem(LeafSystem):
 
         self._weights_index = self.DeclareNumericParameter(BasicVector(dmp.weights.ravel()))
         self._y0_index = self.DeclareNumericParameter(BasicVector(dmp.y0))
+        self._y0_demo_index = self.DeclareNumericParameter(BasicVector(dmp.demonstrated_start))
         self._goal_index = self.DeclareNumericParameter(BasicVector(dmp.goal))
         self._tau_index = self.DeclareNumericParameter(BasicVector([dmp.tau]))
 
@@ -156,6 +157,7 @@ class DmpSystem(LeafSystem):
             y0=np.array(context.get_numeric_parameter(self._y0_index).get_value()),
             goal=np.array(context.get_numeric_parameter(self._goal_index).get_value()),
             tau=float(context.get_numeric_parameter(self._tau_index).get_value()[0]),
+            y0_demo=np.array(context.get_numeric_parameter(self._y0_demo_index).get_value()),
         )
 
     def get_latched_X_WO(self, context) -> RigidTransform:

@@ -98,6 +98,10 @@ def _add_run_arguments(run_p: argparse.ArgumentParser) -> None:
     where.add_argument("--keep-skills", action="store_true",
                        help="keep each run's learned skill/ folder (7 MB each; the weights are in checkpoint/)")
     where.add_argument("--quiet", action="store_true", help="no progress bar")
+    where.add_argument("--fit", choices=("thesis", "tolerance"), default="thesis",
+                       help="how each skill is fitted: 'thesis' (default, the committed grid's: 10 Hz data, "
+                            "Table 6.1's bases) or 'tolerance' (docs/method.md section 2.2); kept in grid.json, "
+                            "so a resumed grid never mixes fits")
 
 
 def _run(args) -> int:
@@ -110,7 +114,7 @@ def _run(args) -> int:
         errors.input_folder(args.skill_dir, "--skill-dir", "a fitted skill (drake-skill fit)")
     config = GridConfig(skills=tuple(args.skills), methods=tuple(args.methods), rewards=tuple(args.rewards),
                         runs=args.runs, episodes=args.episodes, rollouts=args.rollouts, held_out=args.held_out,
-                        seed0=args.seed0, keep_skills=args.keep_skills)
+                        seed0=args.seed0, keep_skills=args.keep_skills, fit=args.fit)
     rollout = RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived")
     outcome = run_grid(args.out, config, skill_dir=args.skill_dir, station_yaml=args.station_config,
                        rollout_config=rollout, workers=args.workers, use_ray=args.ray,

@@ -16,6 +16,7 @@ prints the goal model's summary, and writes SKILL_DIR:
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -83,6 +84,10 @@ def run(args: argparse.Namespace) -> int:
     skill = fit_skill(demos, config)
     skill = save_fitted_skill(skill, args.out, overwrite=args.force)
     print(skill.summary())
+    lines, warnings = skill.fit_report()
+    print("\n".join(lines))
+    for message in warnings:
+        print(f"drake-skill: warning: {message}", file=sys.stderr)
     plot_goal_model(skill.pomrp, args.out / "goal_model.png", clouds=_state_clouds(skill, demos),
                     title=f"goal model of '{config.skill}'")
     rewards = {f"demo {i}": skill.pomrp.rewards(skill.goal_data(d.object_points, d.perception_valid, X_WO=d.X_WO_start))

@@ -63,6 +63,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "file; needed unless --skill-dir or --demos of a shipped skill says it")
     source.add_argument("--skill-dir", type=Path, help="start from this fitted skill")
     source.add_argument("--demos", type=Path, help="fit the skill from these demonstrations (demo_*.npz)")
+    source.add_argument("--fit", choices=("tolerance", "thesis"), default="tolerance",
+                        help="how a skill recorded or fitted here is fitted: 'tolerance' (default) fits the 100 Hz "
+                             "action data with the fewest DMP bases that reproduce each demonstration within 2 mm "
+                             "near contact and 3 mm RMS (or the skill file's dmp_bases); 'thesis' fits the 10 Hz "
+                             "data with thesis Table 6.1's bases, as the committed chapter-7 grid did "
+                             "(docs/method.md section 2.2)")
     search = parser.add_argument_group("policy search")
     search.add_argument("--method", choices=_METHODS, default=None, help="default: pi2-es-cov")
     search.add_argument("--reward", choices=("dense", "sparse"), default=None,
@@ -228,7 +234,7 @@ def prepare_skill(args, out: Path) -> Path:
         demos = demonstrator.record_many(progress=not args.quiet)
         _save_demos(demos, out / "demos")
     print(f"fitting '{name}' from {len(demos)} demonstrations ...")
-    skill = fit_skill(demos, default_skill_config(spec))
+    skill = fit_skill(demos, default_skill_config(spec, fit=getattr(args, "fit", "tolerance")))
     skill = save_fitted_skill(skill, initial, overwrite=True, station_config=_station_config(args, spec),
                               progress=not args.quiet)
     print(skill.summary())

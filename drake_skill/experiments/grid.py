@@ -95,6 +95,10 @@ class GridConfig:
       ``held_out_seed0``, as ``drake-skill learn`` and ``evaluate``.
     keep_skills: keep each run's learned ``skill/`` folder (7 MB each; the
       learned weights are in its ``checkpoint/search.npz`` anyway).
+    fit: how each skill is fitted (``drake_skill.skill.FITS``): "thesis" (the
+      default: the committed chapter-7 grid's fit, so a resumed grid never
+      mixes fits) or "tolerance" (docs/method.md section 2.2). Stored in
+      ``grid.json`` when not "thesis" (grids stored before it have none).
     """
 
     skills: tuple[str, ...] = ("open", "close")
@@ -107,6 +111,7 @@ class GridConfig:
     held_out_seed0: int = HELD_OUT_SEED0
     seed0: int = 0
     keep_skills: bool = False
+    fit: str = "thesis"
     sources: dict[str, str] = dc.field(default_factory=dict)
 
     def validate(self) -> "GridConfig":
@@ -119,6 +124,8 @@ class GridConfig:
                                    ("--rollouts", self.rollouts, 1), ("--held-out", self.held_out, 0)):
             if int(value) < least:
                 raise ValueError(f"{flag} {value}: expected at least {least}; give {flag} {max(least, 1)} or more")
+        if self.fit not in ("thesis", "tolerance"):
+            raise ValueError(f"--fit {self.fit}: unknown fit; give thesis or tolerance")
         if "cma-es" in self.methods and int(self.rollouts) < 2:
             raise ValueError(f"--rollouts {self.rollouts}: cma-es needs at least 2 rollouts per episode; "
                              "give --rollouts 2 or more, or leave cma-es out of --methods")
@@ -139,8 +146,9 @@ class GridConfig:
 
     def settings(self) -> dict[str, Any]:
         """What decides the numbers of a run beyond its cell (kept in ``grid.json``)."""
+        fit = {} if self.fit == "thesis" else {"fit": self.fit}
         return {"episodes": int(self.episodes), "rollouts": int(self.rollouts), "held_out": int(self.held_out),
-                "held_out_seed0": int(self.held_out_seed0), "seed0": int(self.seed0)}
+                "held_out_seed0": int(self.held_out_seed0), "seed0": int(self.seed0), **fit}
 
 
 def run_dir(out, skill: str, method: str, reward: str, run: int) -> Path:
@@ -270,7 +278,7 @@ def execute_task(task: GridTask) -> dict:
 
 # ----------------------------------------------------------------------- planning
 def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None = None,
-                   station_yaml: Path | None = None, quiet: bool = False) -> dict[str, Path]:
+                   station_yaml: Path | None = None, quiet: bool = False, fit: str = "thesis") -> dict[str, Path]:
     """Each skill's fitted skill ``OUT/SKILL/initial_skill``: recorded and fitted once
     (``drake-skill learn``'s :func:`~drake_skill.cli.learn.prepare_skill`), or copied
     from ``skill_dir`` (one skill only). ``sources``: {name: shipped name or skill file}."""
@@ -283,7 +291,7 @@ def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None
         if skill_dir is not None:
             _copy_skill(Path(skill_dir), initial, skill)
         else:
-            prepare_skill(learn_arguments(source, station_yaml, quiet), Path(out) / skill)
+            prepare_skill(learn_arguments(source, station_yaml, quiet, fit), Path(out) / skill)
         if Skill.load(initial).name != skill:
             raise ValueError(f"{initial} holds a '{Skill.load(initial).name}' skill, not '{skill}'; "
                              "use another --out")
@@ -291,7 +299,7 @@ def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None
     return dirs
 
 
-def learn_arguments(source: str, station_yaml: Path | None = None, quiet: bool = False):
+def learn_arguments(source: str, station_yaml: Path | None = None, quiet: bool = False, fit: str = "thesis"):
     """``drake-skill learn --skill SOURCE [--scenario FILE] [--quiet]`` as its parser reads it:
     every option :func:`~drake_skill.cli.learn.prepare_skill` reads is there, at its default."""
     import argparse
@@ -301,7 +309,7 @@ def learn_arguments(source: str, station_yaml: Path | None = None, quiet: bool =
     parser = argparse.ArgumentParser()
     add_arguments(parser)
     return parser.parse_args(["--skill", str(source), *(["--scenario", str(station_yaml)] if station_yaml else []),
-                              *(["--quiet"] if quiet else [])])
+                              *(["--quiet"] if quiet else []), "--fit", fit])
 
 
 def _copy_skill(source: Path, initial: Path, skill: str) -> None:
@@ -436,7 +444,8 @@ def _runner_specs(out: Path, config: GridConfig, skill_dir, station_yaml, rollou
 
     if skill_dir is not None and len(config.skills) != 1:
         raise ValueError(f"--skill-dir {skill_dir}: one fitted skill serves one skill; give one skill in --skills")
-    dirs = prepare_skills(out, config.sources, skill_dir=skill_dir, station_yaml=station_yaml, quiet=quiet)
+    dirs = prepare_skills(out, config.sources, skill_dir=skill_dir, station_yaml=station_yaml, quiet=quiet,
+                          fit=config.fit)
     rollout_config = (rollout_config or RolloutConfig()).validate()
     return {s: RunnerSpec.create(dirs[s], station_config(config.sources[s], station_yaml), rollout_config)
             for s in config.skills}

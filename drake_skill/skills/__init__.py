@@ -7,7 +7,7 @@ with ``yaml_load_typed`` into :class:`SkillSpec`::
     name: open                          # what commands and results call it
     scenario: open                      # a shipped scenario, or a YAML path relative to this file
     demonstrations: 3                   # the thesis's count (section 6.2)
-    dmp_bases: 20                       # basis functions per DMP dimension (thesis Table 6.1)
+    # dmp_bases: 20                     # optional: fixes B; left out, fit chooses it (docs/method.md 2.2)
     exploration_scale: 0.1              # sigma_0 of thesis Eq. 5.3 (docs/method.md section 5)
     success: {joint: lid_hinge, above: 1.7, settle_time: 1.0}
     keyframes:                          # optional: the scripted demonstrator's motion

@@ -62,7 +62,10 @@ class SkillSpec:
     scenario: a shipped scenario's name (``drake_skill/station/scenarios/``)
       or a path to a scenario YAML, relative to the skill file.
     demonstrations: how many the scripted demonstrator records (thesis 6.2: 2-3).
-    dmp_bases: basis functions per DMP dimension (thesis Table 6.1).
+    dmp_bases: basis functions per DMP dimension, an override: None (the
+      default) lets ``drake-skill fit`` choose the fewest that meet the fit
+      tolerance (docs/method.md section 2.2); a number fixes B (thesis
+      Table 6.1: 20 Open, 10 Close, 9 Draw).
     exploration_scale: sigma_0 of thesis Eq. 5.3, a factor on Sigma_b^0
       (docs/method.md section 5).
     dmp_unscaled_dims: DMP weight columns (0-2: x, y, z of the object frame;
@@ -85,7 +88,7 @@ class SkillSpec:
     description: str = ""
     scenario: str = ""
     demonstrations: int = 3
-    dmp_bases: int = 10
+    dmp_bases: typing.Optional[int] = None
     exploration_scale: float = 1.0
     dmp_unscaled_dims: typing.List[int] = dc.field(default_factory=list)
     initial_dmp: str = "random"
@@ -133,8 +136,9 @@ def _check(spec: SkillSpec, where: str) -> SkillSpec:
              f"a shipped scenario ({shipped}) or an existing YAML file ({path} does not exist)")
     if int(spec.demonstrations) < 1:
         _bad(where, "demonstrations", spec.demonstrations, "at least 1 (the thesis: 2 or 3)")
-    if not 3 <= int(spec.dmp_bases) <= 100:
-        _bad(where, "dmp_bases", spec.dmp_bases, "3..100 basis functions (thesis Table 6.1: 9-20)")
+    if spec.dmp_bases is not None and not 3 <= int(spec.dmp_bases) <= 100:
+        _bad(where, "dmp_bases", spec.dmp_bases, "3..100 basis functions (thesis Table 6.1: 9-20), or null to "
+             "choose them from the fit tolerance")
     if not (math.isfinite(spec.exploration_scale) and 0 < spec.exploration_scale <= 100):
         _bad(where, "exploration_scale", spec.exploration_scale, "a factor in (0, 100] on Sigma_b^0")
     dims = list(spec.dmp_unscaled_dims)
