@@ -53,7 +53,8 @@ def table(specs) -> str:
 
     rows = [("skill", "scenario", "demos", "bases", "explore", "start", "success", "keyframes")]
     for s in specs:
-        rows.append((s.name, s.scenario_path().stem, str(s.demonstrations), str(s.dmp_bases),
+        bases = "auto" if s.dmp_bases is None else str(s.dmp_bases)
+        rows.append((s.name, s.scenario_path().stem, str(s.demonstrations), bases,
                      f"{s.exploration_scale:g}", s.initial_dmp,
                      rule_text(s.success) + f" after {s.success.settle_time:g} s",
                      str(len(s.keyframes)) if s.keyframes else "- (teleoperate)"))
