@@ -67,6 +67,10 @@ class SkillConfig:
     dmp_tolerance: how closely each integrated DMP must follow its
       demonstration when the skill file leaves ``dmp_bases`` out
       (``drake_skill.action.fitting.FitTolerance``).
+    dmp_refine: refinement steps on the simulated station after the fit
+      (``drake_skill.learning.refine``, docs/method.md section 2.3); 0: off.
+      ``fit_skill`` itself never simulates; ``drake-skill fit`` and ``learn``
+      apply it.
     dmp_ridge: relative ridge of Sigma_b^0 (``drake_skill.action.dmp.exploration_covariance``).
     seed: picks the demonstration whose DMP starts policy search.
     goal_features: PCA size (8).
@@ -84,6 +88,7 @@ class SkillConfig:
     dmp: DmpConfig = dc.field(default_factory=DmpConfig)
     dmp_data: str = "100hz"
     dmp_tolerance: FitTolerance = dc.field(default_factory=FitTolerance)
+    dmp_refine: int = 1
     dmp_ridge: float = 0.1
     seed: int = 0
     goal_features: GoalFeaturesConfig = dc.field(default_factory=GoalFeaturesConfig)
@@ -123,7 +128,8 @@ def default_skill_config(skill, fit: str = "tolerance") -> SkillConfig:
         bases = THESIS_DMP_BASES.get(spec.name, spec.dmp_bases or THESIS_DMP_BASES_OTHER)
         spec = dc.replace(spec, dmp_bases=int(bases))
         dmp = dc.replace(dmp, scale_rule="amplitude")
-        return SkillConfig(skill=spec.name, spec=spec, dmp=dc.replace(dmp, n_basis=int(bases)), dmp_data="10hz")
+        return SkillConfig(skill=spec.name, spec=spec, dmp=dc.replace(dmp, n_basis=int(bases)), dmp_data="10hz",
+                           dmp_refine=0)
     if spec.dmp_bases is not None:
         dmp.n_basis = int(spec.dmp_bases)
     return SkillConfig(skill=spec.name, spec=spec, dmp=dmp)

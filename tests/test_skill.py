@@ -178,8 +178,19 @@ def test_fit_cli_writes_skill_and_pictures(close_data, tmp_path, capsys):
         save_demonstration(demo, tmp_path / "demos" / f"demo_{i:03d}.npz")
     out = tmp_path / "skill"
     assert main(["fit", "--demos", str(tmp_path / "demos"), "--out", str(out)]) == 0
-    printed = capsys.readouterr().out
+    captured = capsys.readouterr()
+    printed = captured.out
     assert "goal HMM" in printed and "explained variance" in printed
+    # The fit's report (docs/method.md 2.2) and the refinement on the simulated station (2.3): each
+    # demonstration's DMP either follows it more closely after refinement or keeps its plain fit, said.
+    assert "DMP: B = " in printed and printed.count("fit error max") == 2
+    refined = Skill.load(out).info["dmp_refinement"]
+    assert [r["demo"] for r in refined] == [str(tmp_path / "demos" / f"demo_{i:03d}.npz") for i in range(2)]
+    for r in refined:
+        assert 1 <= len(r["errors_mm"]) <= 2 and r["errors_mm"][0] > 0   # one when the plain imitation failed
+        said = (f"{r['demo']}: imitation {r['errors_mm'][0]:.1f} -> " in printed if not r["kept_plain"]
+                else f"{r['demo']}: refining its DMP on the simulated station did not bring" in captured.err)
+        assert said and r["kept_plain"] == (min(r["errors_mm"]) == r["errors_mm"][0])
     for name in ("skill.yaml", "skill.json", "arrays.npz", "pcae.safetensors", "goal_model.png", "demo_returns.png"):
         assert (out / name).stat().st_size > 0, name
     assert Skill.load(out).name == "close"

@@ -184,8 +184,10 @@ def contact_shift_mm(dmp: Dmp, config: DmpConfig, times, mask, shift_m: float = 
     over the samples of ``mask`` ((T,) bool, :func:`contact_mask`) and the
     shifts. A column kept out of the amplitude scaling moves by
     ``shift (1 + w t) exp(-w t)``, w = sqrt(K) / tau for the default
-    critically damped K, D: the start's offset decaying; a scaled column's
-    shape stretches by ``(g - y0') / (g - y0)``. nan for an empty mask.
+    critically damped K, D: the start's offset decaying (or, with
+    ``DmpConfig.start_join``, fading out within that time, after which it is
+    0); a scaled column's shape stretches by ``(g - y0') / (g - y0)``. nan
+    for an empty mask.
     """
     t = np.asarray(times, dtype=float)
     mask = np.asarray(mask, dtype=bool)
@@ -200,7 +202,7 @@ def contact_shift_mm(dmp: Dmp, config: DmpConfig, times, mask, shift_m: float = 
         for sign in (-1.0, 1.0):
             y0 = dmp.y0.copy()
             y0[int(axis)] += sign * shift_m
-            moved = integrate(Dmp(dmp.weights, y0, dmp.goal, dmp.tau), config, rel)[mask, :3]
+            moved = integrate(dmp.with_start(y0), config, rel)[mask, :3]
             worst = max(worst, float(np.linalg.norm(moved - base, axis=1).max()))
     return 1e3 * worst
 

@@ -133,9 +133,11 @@ class DmpSystem(LeafSystem):
         v = context.get_numeric_parameter(self._weights_index).get_value()
         return np.array(v).reshape(self._n_basis, self._weight_dim)
 
-    def set_start_goal(self, context, y0, goal) -> None:
-        """Writes the DMP start and goal poses (7,) each, object frame."""
-        for name, v in (("y0", y0), ("goal", goal)):
+    def set_start_goal(self, context, y0, goal, y0_demo=None) -> None:
+        """Writes the DMP start and goal poses (7,) each, object frame, and, when given, the
+        demonstrated start ``y0_demo`` the weights were fitted from (``Dmp.y0_demo``)."""
+        poses = (("y0", y0), ("goal", goal)) + ((("y0_demo", y0_demo),) if y0_demo is not None else ())
+        for name, v in poses:
             v = np.asarray(v, dtype=float)
             if v.shape != (POSE_DIM,) or not np.all(np.isfinite(v)):
                 raise ValueError(f"{name}: expected a finite pose of shape (7,), got {v.shape}: {v}")
@@ -143,6 +145,8 @@ class DmpSystem(LeafSystem):
                 raise ValueError(f"{name}: quaternion {v[3:]} has norm {np.linalg.norm(v[3:]):.4g}, expected 1")
         context.get_mutable_numeric_parameter(self._y0_index).SetFromVector(np.asarray(y0, dtype=float))
         context.get_mutable_numeric_parameter(self._goal_index).SetFromVector(np.asarray(goal, dtype=float))
+        if y0_demo is not None:
+            context.get_mutable_numeric_parameter(self._y0_demo_index).SetFromVector(np.asarray(y0_demo, float))
 
     def set_duration(self, context, tau: float) -> None:
         """Writes the duration tau (s, > 0)."""

@@ -40,6 +40,20 @@ def _state_clouds(skill, demos):
     return [best.get(s, (0, None))[1] for s in range(skill.pomrp.n_states)]
 
 
+def fit_and_refine_report(skill, demos, station_config=None) -> tuple[list[str], list[str]]:
+    """Refines the freshly fitted ``skill`` (``SkillConfig.dmp_refine``) and returns the lines and
+    warnings that say what the fit chose and how closely each DMP follows its demonstration."""
+    from drake_skill.learning.refine import refine_skill, refinement_lines
+
+    lines, warnings = skill.fit_report()
+    if skill.config.dmp_refine > 0 and skill.config.dmp_data == "100hz":
+        print(f"refining the DMPs on the simulated station ({len(demos)} imitations x "
+              f"{skill.config.dmp_refine + 1}) ...")
+        more, warned = refinement_lines(refine_skill(skill, demos, station_config))
+        lines, warnings = lines + more, warnings + warned
+    return lines, warnings
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--demos", type=Path, required=True, help="folder of demo_*.npz files")
     parser.add_argument("--out", type=Path, required=True, help="skill folder to write")
@@ -49,6 +63,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "skill the demonstrations name)")
     parser.add_argument("--seed", type=int, help="picks the demonstration policy search starts from")
     parser.add_argument("--force", action="store_true", help="replace an existing skill in --out")
+    parser.add_argument("--no-refine", action="store_true",
+                        help="skip the refinement that runs each demonstration's DMP on the scenario's simulated "
+                             "station and refits it so that the executed path, not the commanded one, follows the "
+                             "demonstration (docs/method.md section 2.3; about the demonstrations' duration each)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -81,10 +99,12 @@ def run(args: argparse.Namespace) -> int:
         config.seed = args.seed
     errors.input_file(_pcae_path(config), "pcae_weights", "the PCAE weights (models/pcae.safetensors)")
     print(f"fitting '{config.skill}' from {len(demos)} demonstrations in {args.demos} ...")
+    if args.no_refine:
+        config.dmp_refine = 0
     skill = fit_skill(demos, config)
+    lines, warnings = fit_and_refine_report(skill, demos)
     skill = save_fitted_skill(skill, args.out, overwrite=args.force)
     print(skill.summary())
-    lines, warnings = skill.fit_report()
     print("\n".join(lines))
     for message in warnings:
         print(f"drake-skill: warning: {message}", file=sys.stderr)

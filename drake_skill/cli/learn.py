@@ -36,6 +36,7 @@ and shows the greedy executions live.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from drake_skill.cli import errors
@@ -235,6 +236,11 @@ def prepare_skill(args, out: Path) -> Path:
         _save_demos(demos, out / "demos")
     print(f"fitting '{name}' from {len(demos)} demonstrations ...")
     skill = fit_skill(demos, default_skill_config(spec, fit=getattr(args, "fit", "tolerance")))
+    from drake_skill.cli.fit import fit_and_refine_report
+    lines, warnings = fit_and_refine_report(skill, demos, _station_config(args, spec))
+    print("\n".join(lines))
+    for message in warnings:
+        print(f"drake-skill: warning: {message}", file=sys.stderr)
     skill = save_fitted_skill(skill, initial, overwrite=True, station_config=_station_config(args, spec),
                               progress=not args.quiet)
     print(skill.summary())

@@ -243,9 +243,9 @@ class Imitator:
             y0 = runner.dmp_system.get_dmp(dmp_context).y0.copy()   # measured hand pose in O at reset
             if np.dot(y0[3:], dmp.goal[3:]) < 0:
                 y0[3:] *= -1
-            runner.dmp_system.set_start_goal(dmp_context, y0, dmp.goal)
+            runner.dmp_system.set_start_goal(dmp_context, y0, dmp.goal, y0_demo=dmp.demonstrated_start)
             runner.dmp_system.set_duration(dmp_context, dmp.tau)
-            executed = Dmp(dmp.weights, y0, dmp.goal, dmp.tau)
+            executed = dmp.with_start(y0)
             n = int(math.ceil((dmp.tau + runner.settle_time) * RECORD_HZ - 1e-9))
             advance_station(runner.simulator, station, runner.context, n / RECORD_HZ)
         except Exception as error:   # kept up to where it stopped
