@@ -3,7 +3,9 @@
 ``drake-skill bench imitation [--json]`` / ``python tools/bench_imitation.py [--json]``.
 
 For each demonstration of a skill, its DMP (``drake_skill.skill.fit_skill``
-with the skill file's defaults, or a fitted skill's) is integrated alone and
+with the skill file's defaults and, as ``drake-skill fit`` does, the
+refinement on the simulated station unless --no-refine; or a fitted
+skill's) is integrated alone and
 executed in the simulated station on the demonstration's own object pose
 (``drake_skill.learning.imitation.imitate``: ground-truth object frame, no
 perception, 100 Hz records). Figures (position only; mm unless said):
@@ -32,6 +34,9 @@ perception, 100 Hz records). Figures (position only; mm unless said):
                                 by +-5 cm along x and along y of the object
                                 frame (integrated alone, same goal), max
   contact_samples               how many samples are near contact
+  refined                       the DMP is the refined one (fit_* then compare
+                                the refined DMP, which commands an offset path,
+                                with the demonstration); null: no refinement
 
 Per skill, ``bases`` is the DMP's number of basis functions and ``worst``
 each figure's maximum over the demonstrations (lag_ms: the largest |lag|;
@@ -169,7 +174,7 @@ def bench_skill(skill, demos, quiet: bool = False, shift_m: float = 0.05) -> dic
         dmp = skill.dmps[i]
         imitation = imitator.imitate(dmp, demo)
         figures = imitation_metrics(config, dmp, demo, imitation, shift_m=shift_m)
-        row = {"demo": imitation.demo, "seed": int(demo.seed)}
+        row = {"demo": imitation.demo, "seed": int(demo.seed), "refined": _refined(skill, i)}
         row.update({k: _rounded(v) for k, v in figures.items()})
         rows.append(row)
         stop = f"stopped: {imitation.reason}" if imitation.failed else "ran through"
@@ -180,11 +185,27 @@ def bench_skill(skill, demos, quiet: bool = False, shift_m: float = 0.05) -> dic
     return {"bases": int(config.n_basis), "demos": rows, "worst": worst_of(rows)}
 
 
-def _fit(spec, demos, quiet: bool):
+def _refined(skill, i: int):
+    """Whether DMP ``i`` is the refined one (``drake-skill fit``'s refinement); None for a plain fit."""
+    report = skill.info.get("dmp_refinement") if isinstance(getattr(skill, "info", None), dict) else None
+    if not report or i >= len(report):
+        return None
+    return not bool(report[i].get("kept_plain", True))
+
+
+def _fit(spec, demos, quiet: bool, refine: bool = True):
+    """``fit_skill`` with the skill file's defaults, then, as ``drake-skill fit`` does, the refinement
+    on the simulated station when the config asks for it (``SkillConfig.dmp_refine``) and ``refine``."""
     from drake_skill.skill import default_skill_config, fit_skill
 
     _progress(f"{spec.name}: fitting {len(demos)} demonstrations ...", quiet)
-    return fit_skill(demos, default_skill_config(spec))
+    skill = fit_skill(demos, default_skill_config(spec))
+    if refine and int(getattr(skill.config, "dmp_refine", 0)) > 0:
+        from drake_skill.learning.refine import refine_skill
+
+        _progress(f"{spec.name}: refining the DMPs on the simulated station ...", quiet)
+        refine_skill(skill, demos)
+    return skill
 
 
 def run(args) -> dict:
@@ -232,7 +253,8 @@ def run(args) -> dict:
                 demos = _load_demos(_demo_folder(args.demos, spec.name), spec.name, args.count)
             else:
                 demos = _record(spec, args.count, args.seed, Path(tmp) / spec.name, args.quiet)
-            out[spec.name] = bench_skill(_fit(spec, demos, args.quiet), demos, args.quiet, args.shift)
+            skill = _fit(spec, demos, args.quiet, refine=not args.no_refine)
+            out[spec.name] = bench_skill(skill, demos, args.quiet, args.shift)
     return {"skills": out}
 
 
@@ -298,6 +320,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="first seed of the recorded demonstrations (default 0)")
     parser.add_argument("--shift", type=float, default=0.05, metavar="M",
                         help="start shift of contact_shift_mm, m (default 0.05)")
+    parser.add_argument("--no-refine", action="store_true",
+                        help="imitate the plain fit: leave out the refinement on the simulated station that "
+                             "'drake-skill fit' applies (SkillConfig.dmp_refine)")
     parser.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     return parser
 
