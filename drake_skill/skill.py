@@ -310,9 +310,9 @@ class Skill:
         names = DMP_COLUMNS if self.config.dmp.quaternion == "vector" else ("x", "y", "z", "rx", "ry", "rz")
         scaled = [names[int(k)] for k, why in report["scaled"].items() if why == "scaled"]
         kept = [names[int(k)] for k, why in report["scaled"].items() if why == "via point outside span"]
-        if report.get("start_join_s"):
+        if report.get("start_join"):
             lines.append(f"a start away from the demonstrated one joins the demonstrated path within "
-                         f"{report['start_join_s']:.2f} s, before the first contact")
+                         f"{100 * report['start_join']:.0f} % of the duration, before the first contact")
         lines.append("scaled by g - y0: " + (", ".join(scaled) or "none")
                      + ("; not scaled, their via points outside the start-goal span stay put in the object "
                         "frame: " + ", ".join(kept) if kept else ""))
@@ -658,10 +658,11 @@ START_JOIN_FRACTION = 0.8
 
 
 def _start_join(data: Sequence, masks: Sequence) -> float:
-    """``DmpConfig.start_join`` [s]: START_JOIN_FRACTION of the earliest first contact over the
-    demonstrations (docs/method.md section 2.1); 0 (the spring's transient) when none touches."""
-    firsts = [float(t[m][0] - t[0]) for (t, _), m in zip(data, masks) if np.any(m)]
-    return round(START_JOIN_FRACTION * min(firsts), 3) if firsts else 0.0
+    """``DmpConfig.start_join`` (a fraction of tau): START_JOIN_FRACTION of the earliest first
+    contact over the demonstrations, each as a fraction of its duration (docs/method.md section
+    2.1); 0 (the spring's transient) when none touches."""
+    firsts = [float((t[m][0] - t[0]) / (t[-1] - t[0])) for (t, _), m in zip(data, masks) if np.any(m)]
+    return round(START_JOIN_FRACTION * min(firsts), 4) if firsts else 0.0
 
 
 def _fit_action(demos: Sequence, config: SkillConfig):
@@ -713,5 +714,5 @@ def _fit_action(demos: Sequence, config: SkillConfig):
               "object_state_known": bool(known),
               "tolerance": {"contact_max_mm": tolerance.contact_max_mm, "rms_mm": tolerance.rms_mm},
               "errors": [dict(e.as_dict(), demo=names[i]) for i, e in enumerate(errors)],
-              "scaled": {str(k): v for k, v in fit.scale_reasons.items()}, "start_join_s": join}
+              "scaled": {str(k): v for k, v in fit.scale_reasons.items()}, "start_join": join}
     return fit, dc.replace(config, dmp=fit.config), report

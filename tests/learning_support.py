@@ -54,7 +54,7 @@ def shared_skill(tmp_path_factory) -> dict:
                                          station_config=small_station("close")).record_many(progress=False)
             for i, demo in enumerate(demos):
                 save_demonstration(demo, demo_path(root / "demos", i), force=True)
-            skill = fit_skill(demos, default_skill_config("close"))
+            skill = fit_skill(demos, default_skill_config("close", fit="thesis"))
             fast = dc.replace(skill, dmps=[dc.replace(d, tau=TAU) for d in skill.dmps])
             fast.save(root / "skill", overwrite=True)
             (root / "station.yaml").write_text(yaml_dump_typed(station))

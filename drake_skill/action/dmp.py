@@ -210,9 +210,10 @@ class DmpConfig:
     #: via point outside the span stays put in the object frame); "amplitude"
     #: looks at the amplitude alone (skills fitted before 2026-12-06).
     scale_rule: str = "span"
-    #: Time [s] in which an unscaled column's start offset ``y0 - y0_demo``
+    #: Fraction of tau in which an unscaled column's start offset ``y0 - y0_demo``
     #: fades out (minimum jerk), so that the path joins the demonstrated one
-    #: before contact (docs/method.md section 2.1); 0: the spring's own
+    #: before contact (docs/method.md section 2.1); a fraction, so that it
+    #: scales with tau as the rest of the DMP does. 0: the spring's own
     #: transient ``(y0 - y0_demo)(1 - K s(t))``, which lasts about tau / 2.
     #: ``drake-skill fit`` sets it from the demonstrations' first contact.
     start_join: float = 0.0
@@ -240,8 +241,8 @@ class DmpConfig:
         if self.scale_rule not in _SCALE_RULES:
             raise ValueError(f"DmpConfig.scale_rule: expected one of {_SCALE_RULES}, got {self.scale_rule!r}")
         if not (isinstance(self.start_join, (int, float)) and math.isfinite(self.start_join)
-                and self.start_join >= 0):
-            raise ValueError(f"DmpConfig.start_join: expected a finite time >= 0 s, got {self.start_join!r}")
+                and 0 <= self.start_join <= 1):
+            raise ValueError(f"DmpConfig.start_join: expected a fraction of tau in [0, 1], got {self.start_join!r}")
         if not math.isfinite(self.scale_threshold):
             raise ValueError(f"DmpConfig.scale_threshold: expected a finite value, got {self.scale_threshold!r}")
         return self
@@ -893,7 +894,7 @@ def _start_join(dmp: Dmp, config: DmpConfig, t: np.ndarray, s_rows: np.ndarray) 
 
     In a column that is not scaled, the start offset ``d = y0 - y0_demo``
     enters the path as ``d (1 - K s(t))``, the spring's transient. With
-    ``start_join = T_j`` it enters as ``d (1 - m(t / T_j))`` instead, ``m``
+    ``T_j = start_join tau`` it enters as ``d (1 - m(t / T_j))`` instead, ``m``
     the minimum-jerk ramp ``10 u^3 - 15 u^4 + 6 u^5`` (zero velocity and
     acceleration at both ends): from ``t = T_j`` on the path is the one
     fitted to the demonstration, so a via point after ``T_j`` stays where it
@@ -907,7 +908,7 @@ def _start_join(dmp: Dmp, config: DmpConfig, t: np.ndarray, s_rows: np.ndarray) 
     columns = [i for i in range(POSE_DIM if config.quaternion == "vector" else 3) if i not in config.scaled_dims]
     if not columns or not np.any(offset[columns]):
         return None
-    u = np.clip(t / config.start_join, 0.0, 1.0)
+    u = np.clip(t / (config.start_join * dmp.tau), 0.0, 1.0)
     fade = 1.0 - (10 * u**3 - 15 * u**4 + 6 * u**5)
     out = np.zeros((t.size, POSE_DIM))
     out[:, columns] = (fade - (1.0 - config.K * s_rows))[:, None] * offset[columns]

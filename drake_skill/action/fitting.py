@@ -11,10 +11,11 @@ Plain numpy, no Drake (docs/method.md section 2.2). The DMP itself is
 
   reported as ``max_t e``, ``sqrt(mean_t e^2)`` (RMS) and ``max e`` over the
   samples *near contact*;
-- **near contact** (:func:`contact_mask`): the samples where the object's
-  joint moves, ``|ds/dt| > CONTACT_SPEED_FRACTION * max |ds/dt|``, widened
-  by ``CONTACT_MARGIN_S`` on either side (the hand touches the object a
-  little before the joint starts to move and after it stops);
+- **near contact** (:func:`drake_skill.action.metrics.contact_mask`): the
+  samples where the object's joint moves, ``|ds/dt| > CONTACT_FRACTION *
+  max |ds/dt|``, widened by ``CONTACT_DILATE_S`` on either side (the hand
+  touches the object a little before the joint starts to move and after it
+  stops);
 - **B from a tolerance** (:func:`choose_n_basis`): the smallest B of
   :data:`BASIS_LADDER` (up to a cap and the number of samples) whose fits of
   every demonstration meet :class:`FitTolerance` (2 mm max near contact,
@@ -31,19 +32,14 @@ from typing import Sequence
 import numpy as np
 
 from drake_skill.action.dmp import Dmp, DmpConfig, integrate
+# The one near-contact rule, shared with drake-skill bench imitation.
+from drake_skill.action.metrics import CONTACT_DILATE_S, CONTACT_FRACTION, contact_mask
 
-__all__ = ["BASIS_LADDER", "CONTACT_MARGIN_S", "CONTACT_SPEED_FRACTION", "BasisChoice", "FitError",
+__all__ = ["BASIS_LADDER", "CONTACT_DILATE_S", "CONTACT_FRACTION", "BasisChoice", "FitError",
            "FitTolerance", "Refinement", "choose_n_basis", "contact_mask", "fit_errors", "refine_for_tracking"]
 
 #: The numbers of bases tried, in order (section 2.2); capped by ``FitTolerance.max_bases``.
 BASIS_LADDER = (10, 15, 20, 25, 30, 40, 50, 60, 70, 85, 100)
-#: A sample is near contact where the joint moves faster than this fraction of its peak speed.
-CONTACT_SPEED_FRACTION = 0.02
-#: ... widened by this much on either side [s].
-CONTACT_MARGIN_S = 0.2
-#: A joint that moves less than this over a demonstration is not moved by it
-#: [rad or m, the joint's unit]; then no sample is near contact.
-OBJECT_MOTION_MIN = 1e-3
 
 
 @dc.dataclass
@@ -98,31 +94,6 @@ class BasisChoice:
     met: bool
     #: (B, worst FitError) for every B tried, in order.
     tried: list
-
-
-def contact_mask(times, object_state) -> np.ndarray:
-    """Samples near contact, (T,) bool: where the object's joint moves (module docstring).
-
-    ``times`` (T,) s, ``object_state`` (T,) in the joint's unit. All False when
-    the joint moves less than ``OBJECT_MOTION_MIN`` over the demonstration.
-    """
-    t = np.asarray(times, dtype=float)
-    s = np.asarray(object_state, dtype=float)
-    if t.shape != s.shape or t.ndim != 1 or t.size < 3:
-        raise ValueError(f"times/object_state: expected two arrays of shape (T >= 3,), got {t.shape} and {s.shape}")
-    if not np.all(np.isfinite(s)) or np.ptp(s) < OBJECT_MOTION_MIN:
-        return np.zeros(t.size, dtype=bool)
-    speed = np.abs(np.gradient(s, t))
-    moving = speed > CONTACT_SPEED_FRACTION * speed.max()
-    if not moving.any():
-        return moving
-    # Widen by the margin: a sample is near contact when a moving sample lies within it.
-    moving_t = t[moving]
-    nearest = np.abs(t[:, None] - moving_t[None, :]).min(axis=1) if t.size * moving_t.size <= 4e6 else None
-    if nearest is None:   # long demonstrations: the same with a sorted search
-        k = np.clip(np.searchsorted(moving_t, t), 1, moving_t.size - 1)
-        nearest = np.minimum(np.abs(t - moving_t[k - 1]), np.abs(t - moving_t[k]))
-    return nearest <= CONTACT_MARGIN_S + 1e-9
 
 
 def fit_errors(dmp: Dmp, config: DmpConfig, times, poses, mask=None) -> FitError:

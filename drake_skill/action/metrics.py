@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy import ndimage
 
 from drake_skill.action.dmp import Dmp, DmpConfig, integrate
 
@@ -33,6 +34,9 @@ __all__ = ["CONTACT_FRACTION", "CONTACT_DILATE_S", "position_errors_mm", "contac
 CONTACT_FRACTION = 0.02
 #: ... dilated by this many seconds on either side [s].
 CONTACT_DILATE_S = 0.2
+#: A joint that moves less than this over a demonstration was not moved by it
+#: [rad or m, the joint's unit]: no sample is near contact.
+OBJECT_MOTION_MIN = 1e-3
 #: Largest time shift :func:`lag_ms` considers, either way [s].
 MAX_LAG_S = 0.5
 
@@ -72,24 +76,26 @@ def contact_mask(times, object_state, fraction: float = CONTACT_FRACTION,
     mask is then dilated by ``dilate_s`` (default 0.2 s) on either side, to
     take in the touch before the part moves and the release after (the
     rule the fit's near-contact tolerance uses). An object that never
-    moves (peak speed below 1e-9 per s) gives an empty mask.
+    moves, less than ``OBJECT_MOTION_MIN`` over the demonstration (its
+    joint jiggling as the hand passes), gives an empty mask.
     """
     t = np.asarray(times, dtype=float)
     s = np.asarray(object_state, dtype=float)
     if t.ndim != 1 or s.shape != t.shape or t.size < 2:
         raise ValueError(f"times / object_state: expected two (T,) arrays, T >= 2, got {t.shape} and {s.shape}")
+    if not np.all(np.isfinite(s)) or np.ptp(s) < OBJECT_MOTION_MIN:
+        return np.zeros(t.size, dtype=bool)
     speed = np.abs(np.gradient(s, t))
     peak = float(speed.max())
-    if not np.isfinite(peak) or peak < 1e-9:
+    if peak < 1e-9:
         return np.zeros(t.size, dtype=bool)
     moving = speed > fraction * peak
     dt = float(np.median(np.diff(t)))
     k = max(0, int(round(dilate_s / dt)))
     if k == 0:
         return moving
-    # Dilation: a sample is kept when a moving sample lies within k of it.
-    count = np.convolve(moving.astype(int), np.ones(2 * k + 1, dtype=int), mode="same")
-    return count > 0
+    # Dilation: a sample is kept when a moving sample lies within k of it (any length of array).
+    return ndimage.maximum_filter1d(moving.astype(np.uint8), size=2 * k + 1, mode="constant") > 0
 
 
 def fit_error(dmp: Dmp, config: DmpConfig, times, X_OE) -> tuple[float, float]:
@@ -185,8 +191,8 @@ def contact_shift_mm(dmp: Dmp, config: DmpConfig, times, mask, shift_m: float = 
     shifts. A column kept out of the amplitude scaling moves by
     ``shift (1 + w t) exp(-w t)``, w = sqrt(K) / tau for the default
     critically damped K, D: the start's offset decaying (or, with
-    ``DmpConfig.start_join``, fading out within that time, after which it is
-    0); a scaled column's shape stretches by ``(g - y0') / (g - y0)``. nan
+    ``DmpConfig.start_join``, fading out within that fraction of tau, after
+    which it is 0); a scaled column's shape stretches by ``(g - y0') / (g - y0)``. nan
     for an empty mask.
     """
     t = np.asarray(times, dtype=float)
