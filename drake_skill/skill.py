@@ -72,6 +72,9 @@ class SkillConfig:
       ``fit_skill`` itself never simulates; ``drake-skill fit`` and ``learn``
       apply it.
     dmp_ridge: relative ridge of Sigma_b^0 (``drake_skill.action.dmp.exploration_covariance``).
+    exploration_bases: Sigma_b^0 is estimated from fits with this many bases
+      when the fit chose more (docs/method.md section 2.2); 0: from the
+      fits themselves, as the thesis does.
     seed: picks the demonstration whose DMP starts policy search.
     goal_features: PCA size (8).
     pomrp: goal HMM, MRP and verdict settings.
@@ -89,6 +92,7 @@ class SkillConfig:
     dmp_data: str = "100hz"
     dmp_tolerance: FitTolerance = dc.field(default_factory=FitTolerance)
     dmp_refine: int = 1
+    exploration_bases: int = 20
     dmp_ridge: float = 0.1
     seed: int = 0
     goal_features: GoalFeaturesConfig = dc.field(default_factory=GoalFeaturesConfig)
@@ -653,6 +657,33 @@ def _action_data(demos: Sequence, config: SkillConfig) -> tuple[list, list]:
     return data, masks
 
 
+def coarse_exploration_covariance(data: Sequence, config: DmpConfig, coarse: int, n_basis: int, *, seed: int,
+                                  ridge: float) -> np.ndarray:
+    """Sigma_b^0 (n_basis, d, d) for a fit with many bases, from fits with ``coarse`` bases.
+
+    Thesis Eq. 5.3 takes Sigma_b^0 from the spread of the per-demonstration
+    weights. With B chosen from a tolerance (60-100 bases), the demonstrations'
+    fine-scale differences (each one's own controller ringing, measured at
+    100 Hz) dominate that spread, and samples from it are wild: on a pushing
+    skill of notebook 05 every exploratory rollout failed. The spread is
+    therefore taken from fits with ``coarse`` bases (what the thesis
+    explores) and carried to the fine bases: the weight of a normalised
+    basis mixture is the forcing term near its centre, so block b is the
+    coarse blocks linearly interpolated at fine basis b's centre time
+    (both are equally spaced in time), times ``n_basis / coarse``, which
+    keeps the path spread of a sample (a path integrates the forcing twice:
+    its variance goes as sigma^2 / B for B independent weights).
+    """
+    coarse_fit = fit_demonstrations(data, dc.replace(config, n_basis=int(coarse)), seed=seed, ridge=ridge)
+    u_fine = np.linspace(0.0, 1.0, int(n_basis))
+    u_coarse = np.linspace(0.0, 1.0, int(coarse))
+    blocks = coarse_fit.sigma0.reshape(int(coarse), -1)
+    fine = np.stack([np.interp(u_fine, u_coarse, blocks[:, k]) for k in range(blocks.shape[1])], axis=1)
+    d = coarse_fit.sigma0.shape[1]
+    out = fine.reshape(int(n_basis), d, d) * (n_basis / coarse)
+    return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+
 #: The start offset fades out within this fraction of the time to the first contact.
 START_JOIN_FRACTION = 0.8
 
@@ -710,7 +741,12 @@ def _fit_action(demos: Sequence, config: SkillConfig):
     fit = fit_demonstrations(data, dc.replace(config.dmp, n_basis=n, start_join=join), seed=config.seed,
                              ridge=config.dmp_ridge)
     known = all(np.all(np.isfinite(getattr(d, "object_state_100hz", [np.nan]))) for d in demos)
+    coarse = int(config.exploration_bases)
+    if 0 < coarse < n:
+        fit.sigma0 = coarse_exploration_covariance(data, dc.replace(config.dmp, start_join=join), coarse, n,
+                                                   seed=config.seed, ridge=config.dmp_ridge)
     report = {"n_basis": n, "how": how, "data": config.dmp_data, "tolerance_met": bool(met),
+              "exploration_bases": coarse if 0 < coarse < n else n,
               "object_state_known": bool(known),
               "tolerance": {"contact_max_mm": tolerance.contact_max_mm, "rms_mm": tolerance.rms_mm},
               "errors": [dict(e.as_dict(), demo=names[i]) for i, e in enumerate(errors)],

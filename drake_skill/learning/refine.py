@@ -23,7 +23,7 @@ import copy
 
 import numpy as np
 
-from drake_skill.action.dmp import exploration_covariance, fit_dmp
+from drake_skill.action.dmp import fit_dmp
 from drake_skill.action.fitting import refine_for_tracking
 from drake_skill.action.quaternion import make_quaternions_continuous
 
@@ -48,7 +48,8 @@ def refine_skill(skill, demos, station_config=None, iterations: int | None = Non
     demonstration the RMS error [mm] of the executed path against the
     demonstration after each execution (plain fit first), whether the plain
     fit was kept, and the imitation's failure reason when one failed.
-    Sigma_b^0 is recomputed from the refined DMPs (thesis Eq. 5.3).
+    Sigma_b^0 is kept: a refinement moves each DMP by its tracking error,
+    not by the demonstrations' spread that Sigma_b^0 describes.
     """
     from drake_skill.learning.imitation import Imitator
 
@@ -82,7 +83,6 @@ def refine_skill(skill, demos, station_config=None, iterations: int | None = Non
         report.append({"demo": str(name), "errors_mm": [round(e, 3) for e in result.errors_mm],
                        "kept_plain": bool(result.kept_plain), "failures": failures})
     skill.dmps = dmps
-    skill.sigma0 = exploration_covariance(dmps, skill.config.dmp_ridge)
     skill.info["dmp_refinement"] = report
     return report
 
