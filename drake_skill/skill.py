@@ -312,14 +312,14 @@ class Skill:
                 warnings.append(f"{e['demo']}: the object's joint never moves in it (no contact); check that "
                                 "the demonstration touches the object, or record it again")
         names = DMP_COLUMNS if self.config.dmp.quaternion == "vector" else ("x", "y", "z", "rx", "ry", "rz")
-        scaled = [names[int(k)] for k, why in report["scaled"].items() if why == "scaled"]
-        kept = [names[int(k)] for k, why in report["scaled"].items() if why == "via point outside span"]
+        by_reason: dict[str, list] = {}
+        for k, why in report["scaled"].items():
+            by_reason.setdefault(why, []).append(names[int(k)])
         if report.get("start_join"):
             lines.append(f"a start away from the demonstrated one joins the demonstrated path within "
                          f"{100 * report['start_join']:.0f} % of the duration, before the first contact")
-        lines.append("scaled by g - y0: " + (", ".join(scaled) or "none")
-                     + ("; not scaled, their via points outside the start-goal span stay put in the object "
-                        "frame: " + ", ".join(kept) if kept else ""))
+        lines.append("columns scaled by g - y0: " + (", ".join(by_reason.pop("scaled", [])) or "none") + "; not: "
+                     + "; ".join(f"{', '.join(cols)} ({why})" for why, cols in by_reason.items()))
         return lines, warnings
 
     # ------------------------------------------------------------ save/load
@@ -724,7 +724,8 @@ def _fit_action(demos: Sequence, config: SkillConfig):
         dmps, dmp_config = fit_with(n)
         errors = [fit_errors(d, dmp_config, t, p, m) for d, (t, p), m in zip(dmps, data, masks)]
         met = all(tolerance.met_by(e) for e in errors)
-        how = "fixed by the skill file (dmp_bases)"
+        how = ("thesis Table 6.1 (fit: thesis)" if config.dmp_data == "10hz"
+               else "fixed by the skill file (dmp_bases)")
     else:
         choice = choose_n_basis(fit_with, data, masks, tolerance)
         n, errors, met = choice.n_basis, choice.errors, choice.met
@@ -738,8 +739,11 @@ def _fit_action(demos: Sequence, config: SkillConfig):
                 "longer, smoother demonstration, or set dmp_bases in the skill file to accept the error")
         how = "the fewest that meet the tolerance"
     join = _start_join(data, masks) if config.dmp_data != "10hz" else 0.0
-    fit = fit_demonstrations(data, dc.replace(config.dmp, n_basis=n, start_join=join), seed=config.seed,
-                             ridge=config.dmp_ridge)
+    # Joined before contact, an unscaled path keeps the contact where it was shown; stretching
+    # any column would move it (docs/method.md section 2.1).
+    rule = "joined" if join > 0 and config.dmp.scale_rule == "span" else config.dmp.scale_rule
+    fit = fit_demonstrations(data, dc.replace(config.dmp, n_basis=n, start_join=join, scale_rule=rule),
+                             seed=config.seed, ridge=config.dmp_ridge)
     known = all(np.all(np.isfinite(getattr(d, "object_state_100hz", [np.nan]))) for d in demos)
     coarse = int(config.exploration_bases)
     if 0 < coarse < n:

@@ -154,7 +154,7 @@ MAX_DURATION_S = 3600.0
 MAX_INTEGRATION_STEPS = 2_000_000
 _QUATERNION_MODES = ("vector", "ude")
 _REGRESSIONS = ("lwr", "least_squares")
-_SCALE_RULES = ("span", "amplitude")
+_SCALE_RULES = ("span", "amplitude", "joined")
 #: A path may leave its start-goal span by this fraction of the span (and at
 #: least SPAN_MARGIN_MIN) and still count as within it (scale_rule "span").
 SPAN_MARGIN_FRACTION = 0.1
@@ -208,7 +208,10 @@ class DmpConfig:
     #: "span" scales a column only where every demonstration moves by at least
     #: ``scale_threshold`` *and* its path stays within its start-goal span (a
     #: via point outside the span stays put in the object frame); "amplitude"
-    #: looks at the amplitude alone (skills fitted before 2026-12-06).
+    #: looks at the amplitude alone (skills fitted before 2026-12-06);
+    #: "joined" scales none: with ``start_join`` the path joins the
+    #: demonstrated one before contact, and stretching would move the contact
+    #: (drake-skill fit chooses it when the demonstrations touch the object).
     scale_rule: str = "span"
     #: Fraction of tau in which an unscaled column's start offset ``y0 - y0_demo``
     #: fades out (minimum jerk), so that the path joins the demonstrated one
@@ -644,6 +647,8 @@ def scale_choice(paths: Sequence[np.ndarray], config: DmpConfig) -> dict[int, st
     for i in range(config.weight_dim):
         if i in config.unscaled_dims:
             reasons[i] = "unscaled_dims"
+        elif config.scale_rule == "joined":
+            reasons[i] = "joins the demonstration before contact"
         elif not np.all(amplitudes[:, i] >= config.scale_threshold):
             reasons[i] = "moves < threshold"
         elif config.scale_rule == "span" and i in span_dims and not all(_within_span(p[:, i]) for p in paths):
