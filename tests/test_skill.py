@@ -201,3 +201,8 @@ def test_fit_cli_writes_skill_and_pictures(close_data, tmp_path, capsys):
     assert err == [f"drake-skill: error: --out {out}: already holds a skill; pass --force to replace it "
                    "or choose another folder"]
     assert Skill.load(out).name == "close"
+    # The thesis's fit (docs/method.md 2.2): 10 Hz data, Table 6.1's 10 bases, no refinement.
+    assert main(["fit", "--demos", str(tmp_path / "demos"), "--out", str(tmp_path / "thesis"), "--fit", "thesis"]) == 0
+    thesis = Skill.load(tmp_path / "thesis")
+    assert thesis.config.dmp.n_basis == 10 and thesis.config.dmp_data == "10hz" and thesis.config.dmp_refine == 0
+    assert thesis.info["dmp_fit"]["how"] == "thesis Table 6.1 (fit: thesis)" and "dmp_refinement" not in thesis.info

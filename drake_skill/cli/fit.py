@@ -63,6 +63,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "skill the demonstrations name)")
     parser.add_argument("--seed", type=int, help="picks the demonstration policy search starts from")
     parser.add_argument("--force", action="store_true", help="replace an existing skill in --out")
+    parser.add_argument("--fit", choices=("tolerance", "thesis"), default="tolerance",
+                        help="'tolerance' (default): the 100 Hz action data, the fewest DMP bases that reproduce "
+                             "each demonstration within 2 mm near contact and 3 mm RMS (or the skill file's "
+                             "dmp_bases), refined on the simulated station; 'thesis': the 10 Hz data, thesis Table "
+                             "6.1's bases, no refinement (docs/method.md section 2.2)")
     parser.add_argument("--no-refine", action="store_true",
                         help="skip the refinement that runs each demonstration's DMP on the scenario's simulated "
                              "station and refits it so that the executed path, not the commanded one, follows the "
@@ -88,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     demos = load_demonstrations(args.demos)
     spec = errors.skill(args.skill) if args.skill else errors.skill(
         demos[0].skill, f"--demos {args.demos} (skill '{demos[0].skill}'; give its skill file as --skill)")
-    config = default_skill_config(spec)
+    config = default_skill_config(spec, fit=args.fit)
     if args.config:
         config = errors.load_yaml(SkillConfig, args.config, "--config", defaults=config)
         if config.skill != spec.name:
