@@ -188,3 +188,23 @@ def test_refinement_that_diverges_keeps_the_plain_fit():
 
     result = refine_for_tracking(lambda c: fit_dmp(t, c, config), execute, t, target, iterations=2)
     assert result.kept_plain and result.dmp is calls[0] and result.errors_mm[1] == np.inf
+
+
+def test_a_demonstration_that_never_moves_the_object_is_warned_about():
+    """Bad input: a demonstration whose object never moves cannot have touched it; fit says which."""
+    from drake_skill.skill import Skill, SkillConfig, _fit_action
+    from drake_skill.skills import load_skill
+
+    t, p = ramp_path(duration=3.0)
+    moved = np.where(t > 1.5, 0.3 * (t - 1.5), 0.0)
+    demos = [SimpleNamespace(times_100hz=t, X_OE_100hz=p, object_state_100hz=moved, path="demo_000.npz"),
+             SimpleNamespace(times_100hz=t, X_OE_100hz=p + [0, 0.01, 0, 0, 0, 0, 0],
+                             object_state_100hz=np.zeros_like(t), path="demo_001.npz")]
+    spec = load_skill("slide")
+    config = SkillConfig(skill="slide", spec=spec)
+    _, config, report = _fit_action(demos, config)
+    assert [e["contact_samples"] > 0 for e in report["errors"]] == [True, False]
+    lines, warnings = Skill.fit_report(SimpleNamespace(info={"dmp_fit": report}, config=config))
+    assert warnings == ["demo_001.npz: the object's joint never moves in it (no contact); check that the "
+                        "demonstration touches the object, or record it again"]
+    assert lines[0].startswith(f"DMP: B = {report['n_basis']} bases (the fewest that meet the tolerance")
