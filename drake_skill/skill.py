@@ -639,8 +639,7 @@ def _action_data(demos: Sequence, config: SkillConfig) -> tuple[list, list]:
     if config.dmp_data not in DMP_DATA:
         raise ValueError(f"config.dmp_data: {config.dmp_data!r}; expected one of {', '.join(DMP_DATA)}")
     data, masks = [], []
-    for i, d in enumerate(demos):
-        name = getattr(d, "path", None) or f"demos[{i}]"
+    for name, d in zip(_demo_names(demos), demos):
         if config.dmp_data == "100hz":
             if getattr(d, "times_100hz", None) is None or getattr(d, "X_OE_100hz", None) is None:
                 raise ValueError(f"{name}: no 100 Hz action data (times_100hz, X_OE_100hz); record it again "
@@ -721,9 +720,7 @@ def _fit_action(demos: Sequence, config: SkillConfig):
         if n > shortest:
             raise ValueError(f"{names[int(np.argmin([len(t) for t, _ in data]))]}: {shortest} samples, fewer than "
                              f"the {n} DMP bases (dmp.n_basis); record a longer demonstration or use fewer bases")
-        dmps, dmp_config = fit_with(n)
-        errors = [fit_errors(d, dmp_config, t, p, m) for d, (t, p), m in zip(dmps, data, masks)]
-        met = all(tolerance.met_by(e) for e in errors)
+        errors = None   # measured on the fit below, the only one made
         how = ("thesis Table 6.1 (fit: thesis)" if config.dmp_data == "10hz"
                else "fixed by the skill file (dmp_bases)")
     else:
@@ -744,6 +741,10 @@ def _fit_action(demos: Sequence, config: SkillConfig):
     rule = "joined" if join > 0 and config.dmp.scale_rule == "span" else config.dmp.scale_rule
     fit = fit_demonstrations(data, dc.replace(config.dmp, n_basis=n, start_join=join, scale_rule=rule),
                              seed=config.seed, ridge=config.dmp_ridge)
+    if errors is None:
+        # Each DMP integrated from its own start: the join and the scaled columns do not change it.
+        errors = [fit_errors(d, fit.config, t, p, m) for d, (t, p), m in zip(fit.dmps, data, masks)]
+        met = all(tolerance.met_by(e) for e in errors)
     known = all(np.all(np.isfinite(getattr(d, "object_state_100hz", [np.nan]))) for d in demos)
     coarse = int(config.exploration_bases)
     if 0 < coarse < n:

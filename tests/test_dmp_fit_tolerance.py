@@ -208,3 +208,14 @@ def test_a_demonstration_that_never_moves_the_object_is_warned_about():
     assert warnings == ["demo_001.npz: the object's joint never moves in it (no contact); check that the "
                         "demonstration touches the object, or record it again"]
     assert lines[0].startswith(f"DMP: B = {report['n_basis']} bases (the fewest that meet the tolerance")
+
+
+def test_a_demonstration_without_its_100hz_data_names_itself_and_the_fix():
+    from drake_skill.skill import SkillConfig, _fit_action
+
+    t, p = ramp_path(duration=2.0)
+    demos = [SimpleNamespace(times_100hz=t, X_OE_100hz=p, object_state_100hz=np.zeros_like(t), path="demo_000.npz"),
+             SimpleNamespace(times_100hz=None, X_OE_100hz=None, times=t[::10], X_OE=p[::10], path="demo_001.npz")]
+    with pytest.raises(ValueError, match=r"^demo_001\.npz: no 100 Hz action data \(times_100hz, X_OE_100hz\); "
+                                         r"record it again or fit the 10 Hz samples with dmp_data: 10hz$"):
+        _fit_action(demos, SkillConfig(skill="slide"))

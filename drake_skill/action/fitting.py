@@ -33,7 +33,7 @@ import numpy as np
 
 from drake_skill.action.dmp import Dmp, DmpConfig, integrate
 # The one near-contact rule, shared with drake-skill bench imitation.
-from drake_skill.action.metrics import CONTACT_DILATE_S, CONTACT_FRACTION, contact_mask
+from drake_skill.action.metrics import CONTACT_DILATE_S, CONTACT_FRACTION, contact_mask, position_errors_mm
 
 __all__ = ["BASIS_LADDER", "CONTACT_DILATE_S", "CONTACT_FRACTION", "BasisChoice", "FitError",
            "FitTolerance", "Refinement", "choose_n_basis", "contact_mask", "fit_errors", "refine_for_tracking"]
@@ -102,12 +102,11 @@ def fit_errors(dmp: Dmp, config: DmpConfig, times, poses, mask=None) -> FitError
     ``mask``: (T,) bool samples near contact (:func:`contact_mask`), or None.
     """
     t = np.asarray(times, dtype=float)
-    y = np.asarray(poses, dtype=float)
     path = integrate(dmp, config, times=t - t[0])
-    e = 1000.0 * np.linalg.norm(path[:, :3] - y[:, :3], axis=1)
+    worst, rms = position_errors_mm(path, poses)
     m = np.zeros(t.size, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
-    return FitError(max_mm=float(e.max()), rms_mm=float(np.sqrt(np.mean(e * e))),
-                    contact_max_mm=float(e[m].max()) if m.any() else 0.0, contact_samples=int(m.sum()))
+    contact = position_errors_mm(path, poses, m)[0] if m.any() else 0.0
+    return FitError(max_mm=worst, rms_mm=rms, contact_max_mm=contact, contact_samples=int(m.sum()))
 
 
 def _worst(errors: Sequence[FitError]) -> FitError:
@@ -189,8 +188,7 @@ def refine_for_tracking(fit, execute, times, target, iterations: int = 1, gain: 
         if not np.all(np.isfinite(measured)):
             errors.append(math.inf)   # the execution failed: no correction from it
             break
-        err = np.linalg.norm(measured[:, :3] - target[:, :3], axis=1)
-        errors.append(float(1000.0 * np.sqrt(np.mean(err * err))))
+        errors.append(position_errors_mm(measured, target)[1])
         if k == iterations:
             break
         command = command + gain * (target - measured)

@@ -40,6 +40,23 @@ def _state_clouds(skill, demos):
     return [best.get(s, (0, None))[1] for s in range(skill.pomrp.n_states)]
 
 
+def add_fit_argument(parser, help_prefix: str = "") -> None:
+    """``--fit tolerance|thesis`` (docs/method.md section 2.2), as ``fit`` and ``learn`` take it."""
+    parser.add_argument("--fit", choices=("tolerance", "thesis"), default="tolerance",
+                        help=help_prefix + "'tolerance' (default): the 100 Hz action data, the fewest DMP bases "
+                             "that reproduce each demonstration within 2 mm near contact and 3 mm RMS (or the skill "
+                             "file's dmp_bases), refined on the simulated station; 'thesis': the 10 Hz data, thesis "
+                             "Table 6.1's bases, no refinement, as the committed chapter-7 grid "
+                             "(docs/method.md section 2.2)")
+
+
+def print_fit_report(lines: list[str], warnings: list[str]) -> None:
+    """The fit's lines on stdout, each warning as one ``drake-skill: warning:`` line on stderr."""
+    print("\n".join(lines))
+    for message in warnings:
+        print(f"drake-skill: warning: {message}", file=sys.stderr)
+
+
 def fit_and_refine_report(skill, demos, station_config=None) -> tuple[list[str], list[str]]:
     """Refines the freshly fitted ``skill`` (``SkillConfig.dmp_refine``) and returns the lines and
     warnings that say what the fit chose and how closely each DMP follows its demonstration."""
@@ -63,11 +80,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "skill the demonstrations name)")
     parser.add_argument("--seed", type=int, help="picks the demonstration policy search starts from")
     parser.add_argument("--force", action="store_true", help="replace an existing skill in --out")
-    parser.add_argument("--fit", choices=("tolerance", "thesis"), default="tolerance",
-                        help="'tolerance' (default): the 100 Hz action data, the fewest DMP bases that reproduce "
-                             "each demonstration within 2 mm near contact and 3 mm RMS (or the skill file's "
-                             "dmp_bases), refined on the simulated station; 'thesis': the 10 Hz data, thesis Table "
-                             "6.1's bases, no refinement (docs/method.md section 2.2)")
+    add_fit_argument(parser)
     parser.add_argument("--no-refine", action="store_true",
                         help="skip the refinement that runs each demonstration's DMP on the scenario's simulated "
                              "station and refits it so that the executed path, not the commanded one, follows the "
@@ -110,9 +123,7 @@ def run(args: argparse.Namespace) -> int:
     lines, warnings = fit_and_refine_report(skill, demos)
     skill = save_fitted_skill(skill, args.out, overwrite=args.force)
     print(skill.summary())
-    print("\n".join(lines))
-    for message in warnings:
-        print(f"drake-skill: warning: {message}", file=sys.stderr)
+    print_fit_report(lines, warnings)
     plot_goal_model(skill.pomrp, args.out / "goal_model.png", clouds=_state_clouds(skill, demos),
                     title=f"goal model of '{config.skill}'")
     rewards = {f"demo {i}": skill.pomrp.rewards(skill.goal_data(d.object_points, d.perception_valid, X_WO=d.X_WO_start))

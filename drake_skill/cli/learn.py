@@ -36,7 +36,6 @@ and shows the greedy executions live.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from drake_skill.cli import errors
@@ -64,12 +63,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "file; needed unless --skill-dir or --demos of a shipped skill says it")
     source.add_argument("--skill-dir", type=Path, help="start from this fitted skill")
     source.add_argument("--demos", type=Path, help="fit the skill from these demonstrations (demo_*.npz)")
-    source.add_argument("--fit", choices=("tolerance", "thesis"), default="tolerance",
-                        help="how a skill recorded or fitted here is fitted: 'tolerance' (default) fits the 100 Hz "
-                             "action data with the fewest DMP bases that reproduce each demonstration within 2 mm "
-                             "near contact and 3 mm RMS (or the skill file's dmp_bases); 'thesis' fits the 10 Hz "
-                             "data with thesis Table 6.1's bases, as the committed chapter-7 grid did "
-                             "(docs/method.md section 2.2)")
+    from drake_skill.cli.fit import add_fit_argument
+    add_fit_argument(source, "how a skill recorded or fitted here is fitted: ")
     search = parser.add_argument_group("policy search")
     search.add_argument("--method", choices=_METHODS, default=None, help="default: pi2-es-cov")
     search.add_argument("--reward", choices=("dense", "sparse"), default=None,
@@ -236,11 +231,8 @@ def prepare_skill(args, out: Path) -> Path:
         _save_demos(demos, out / "demos")
     print(f"fitting '{name}' from {len(demos)} demonstrations ...")
     skill = fit_skill(demos, default_skill_config(spec, fit=getattr(args, "fit", "tolerance")))
-    from drake_skill.cli.fit import fit_and_refine_report
-    lines, warnings = fit_and_refine_report(skill, demos, _station_config(args, spec))
-    print("\n".join(lines))
-    for message in warnings:
-        print(f"drake-skill: warning: {message}", file=sys.stderr)
+    from drake_skill.cli.fit import fit_and_refine_report, print_fit_report
+    print_fit_report(*fit_and_refine_report(skill, demos, _station_config(args, spec)))
     skill = save_fitted_skill(skill, initial, overwrite=True, station_config=_station_config(args, spec),
                               progress=not args.quiet)
     print(skill.summary())
