@@ -7,6 +7,7 @@ in a second process inside a network namespace of its own.
 """
 
 import copy
+from dataclasses import replace as dc_replace
 import json
 import os
 import re
@@ -201,6 +202,77 @@ def test_a_learning_run_on_the_simulated_robot(tmp_path, tmp_path_factory):
     assert (tmp_path / "learn" / "skill" / "skill.json").is_file()
     accepted, dropped = robot.command_counts()
     assert accepted > 100 and dropped <= 0.01 * accepted, (accepted, dropped)
+
+
+def test_refinement_on_the_simulated_robot_brings_its_path_to_the_demonstration(tmp_path, tmp_path_factory):
+    """``refine_on_robot`` (drake-skill hardware refine): every execution on the robot, the
+    robot's lag removed from a DMP fitted to a path the station measured."""
+    from types import SimpleNamespace
+
+    from learning_support import shared_skill
+
+    from drake_skill.learning.refine import refine_on_robot
+    from drake_skill.skill import Skill
+
+    shared = shared_skill(tmp_path_factory)
+    station_config = copy.deepcopy(shared["station"])
+    station_config.enable_camera = False
+    # The "demonstration": a 1 s move of 16 cm in free space as the simulated station measured it (100 Hz).
+    sim = StationSimulation(station_config)
+    X_WO = sim.reset(seed=3)
+    home = sim.home_pose()
+    moved = RigidTransform(home.rotation(), home.translation() + [0.0, 0.12, 0.10])
+    plan = PosePlan.from_poses([0.0, 0.2, 1.2, 1.5], [home, home, moved, moved], [0.08] * 4)
+    log = sim.run(plan, 1.8)
+    from drake_skill.demos.format import object_frame_poses
+
+    X_OE = object_frame_poses(pose_to_vector(X_WO), log.ee_pose)
+    X_OE[:, 3:] = make_quaternions_continuous(X_OE[:, 3:])
+    skill = Skill.load(shared["skill_dir"])
+    config = dc_replace(skill.config, dmp_data="100hz", dmp_refine=1)
+    skill = dc_replace(skill, config=config, dmps=[fit_dmp(log.times, X_OE, config.dmp)], initial_index=0)
+    demo = SimpleNamespace(seed=3, X_WO_true=pose_to_vector(X_WO), times_100hz=log.times, X_OE_100hz=X_OE,
+                           path="free_move")
+
+    hardware_config = _hardware_config(station_config)
+    hardware_config.status_timeout = 0.3           # two real-time simulators in one process (see above)
+    hardware_config.station.reflex.enabled = False
+    lcm = DrakeLcm("memq://")
+    robot = SimRobot(hardware_config, lcm=lcm, pump=False)
+    station = build_hardware_station(hardware_config, lcm=lcm)
+    placed = []
+    robot.start(seed=3)
+    try:
+        (report,) = refine_on_robot(skill, [demo], station, iterations=1,
+                                    prompt=lambda seed, X: placed.append(pose_to_vector(X)))
+    finally:
+        robot.stop()
+    assert report["on"] == "robot" and not report["failures"], report
+    # Two runs, each from the demonstration's start (the first run left the hand at its end), after
+    # the person was told to place the object at the demonstration's pose.
+    assert len(placed) == 2 and np.allclose(placed[0], demo.X_WO_true, atol=1e-9)
+    plain, refined = report["errors_mm"]
+    # The plain DMP commands the measured path and lags behind it again; one step removes half
+    # of that (measured: 3.5 -> 1.8 mm RMS, also with both cores loaded by other work).
+    assert not report["kept_plain"] and refined < 0.6 * plain, report
+    assert skill.info["dmp_refinement"] == [report]
+    skill.save(tmp_path / "refined")
+    assert Skill.load(tmp_path / "refined").info["dmp_refinement"][0]["on"] == "robot"
+
+
+def test_hardware_refine_refuses_a_thesis_fit_and_its_own_folder(tmp_path_factory, capsys):
+    from learning_support import shared_skill
+
+    from drake_skill.cli.main import main
+    from drake_skill.learning.refine import refine_on_robot
+    from drake_skill.skill import Skill
+
+    shared = shared_skill(tmp_path_factory)
+    with pytest.raises(ValueError, match="10 Hz data .* --fit tolerance"):
+        refine_on_robot(Skill.load(shared["skill_dir"]), [], station=None)
+    assert main(["hardware", "refine", "--skill-dir", str(shared["skill_dir"]), "--demos", str(shared["demos_dir"]),
+                 "--out", str(shared["skill_dir"])]) == 2
+    assert "the fitted skill's own folder" in capsys.readouterr().err
 
 
 # --------------------------------------------------------------------------- safety

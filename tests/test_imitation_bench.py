@@ -179,15 +179,16 @@ def test_imitate_a_short_free_space_motion_on_the_demonstration_grid():
 def test_a_fitted_skill_must_come_with_the_demonstrations_it_was_fitted_from(tmp_path):
     from types import SimpleNamespace
 
-    from drake_skill.bench.imitation import _check_pairs, _demo_folder
+    from drake_skill.bench.imitation import _demo_folder
+    from drake_skill.learning.imitation import check_demo_pairs
 
     start = minimum_jerk_path([0.0])
     dmps = [SimpleNamespace(y0=start[0]), SimpleNamespace(y0=start[0] + [0.02, 0, 0, 0, 0, 0, 0])]
     demos = [SimpleNamespace(X_OE=start, path=f"d/demo_00{i}.npz") for i in range(2)]
     with pytest.raises(ValueError, match="2 demonstrations, but the skill was fitted from 1"):
-        _check_pairs(SimpleNamespace(dmps=dmps[:1]), demos, "--demos d")
+        check_demo_pairs(SimpleNamespace(dmps=dmps[:1]), demos, "--demos d")
     with pytest.raises(ValueError, match="demo_001.npz starts 20.0 mm from the skill's DMP 1"):
-        _check_pairs(SimpleNamespace(dmps=dmps), demos, "--demos d")
+        check_demo_pairs(SimpleNamespace(dmps=dmps), demos, "--demos d")
     (tmp_path / "open").mkdir()
     (tmp_path / "open" / "demo_000.npz").write_bytes(b"")
     assert _demo_folder(tmp_path, "open") == tmp_path / "open"

@@ -148,20 +148,6 @@ def _record(spec, count: int, seed: int, folder: Path, quiet: bool):
     return load_demonstrations(folder)
 
 
-def _check_pairs(skill, demos, where: str) -> None:
-    """A fitted skill's DMPs must be its demonstrations' (same count and starts)."""
-    import numpy as np
-
-    if len(skill.dmps) != len(demos):
-        raise ValueError(f"{where}: {len(demos)} demonstrations, but the skill was fitted from {len(skill.dmps)}; "
-                         "give the folder it was fitted from as --demos")
-    for i, (dmp, demo) in enumerate(zip(skill.dmps, demos)):
-        gap = float(np.linalg.norm(dmp.y0[:3] - demo.X_OE[0, :3]))
-        if gap > 1e-3:
-            raise ValueError(f"{where}: {Path(demo.path or f'demo {i}').name} starts {1e3 * gap:.1f} mm from the "
-                             f"skill's DMP {i}; give the folder the skill was fitted from as --demos")
-
-
 # ------------------------------------------------------------------ one skill
 def bench_skill(skill, demos, quiet: bool = False, shift_m: float = 0.05) -> dict:
     """``{"bases", "demos", "worst"}`` of one fitted skill over ``demos`` (its DMPs in the same order)."""
@@ -211,6 +197,7 @@ def _fit(spec, demos, quiet: bool, refine: bool = True):
 def run(args) -> dict:
     """The JSON object of the benchmark (module docstring) for parsed ``args``."""
     from drake_skill.cli import errors
+    from drake_skill.learning.imitation import check_demo_pairs
 
     out = {}
     if args.count and args.count < 2:
@@ -230,7 +217,7 @@ def run(args) -> dict:
                                         f"{' or '.join(map(str, candidates))}; give the folder the skill was "
                                         "fitted from as --demos")
         demos = _load_demos(folder, skill.name, 0)
-        _check_pairs(skill, demos, f"--demos {folder}")
+        check_demo_pairs(skill, demos, f"--demos {folder}")
         demos = demos[:args.count] if args.count else demos
         out[skill.name] = bench_skill(skill, demos, args.quiet, args.shift)
         return {"skills": out}

@@ -4,6 +4,8 @@
                              [--rollouts 1] [--seed0 0] [--episodes E] [--out DIR] [--yes]
     drake-skill hardware record-demo --skill open --out DIR [--lcm-url URL] [--config hardware.yaml]
                              [--duration 15] [--seed 0] [--yes]
+    drake-skill hardware refine --skill-dir DIR --demos DIR [--iterations 1] [--out DIR]
+                             [--lcm-url URL] [--config hardware.yaml] [--yes]
 
 The same diagram as in simulation, with the simulated station swapped for
 the hardware station (``drake_skill.station.hardware.station``): position commands
@@ -21,6 +23,18 @@ rollout on the robot; its output folder is ``--out``). Before every rollout
 it prints where to place the object and waits for Enter (a human resets the
 scene; ``--yes`` does not wait, e.g. against sim-robot, which does not reset
 itself). Prints a table and writes ``hardware_run.json`` in ``--out``.
+
+refine: removes the robot's own lag and load offset from a fitted skill's
+DMPs (docs/method.md section 2.3). For each demonstration the skill was
+fitted from (``--demos``, in the fit's order), its DMP runs on the robot on
+the demonstration's object pose, then is refitted to demonstration +
+(demonstration - measured), ``--iterations`` times; the DMP whose executed
+path came closest to the demonstration is kept (the plain one when no
+refinement helped, with a warning saying so). Before every run it prints
+where to place the object and waits for Enter, after the hand has moved
+(slowly, 10 cm/s) to the demonstration's start. The refined skill is written
+to ``--out`` (default SKILL/hardware_refined); the fitted skill is never
+changed. ``fit`` refines on the simulated station only.
 
 record-demo: records a kinesthetic demonstration: run the driver in a
 compliant mode (``--control_mode=torque``: with no command it holds the arm
@@ -45,7 +59,7 @@ import sys
 from pathlib import Path
 
 NAME = "hardware"
-HELP = "a skill on a real Panda over LCM: run (greedy or learning), record-demo (kinesthetic)"
+HELP = "a skill on a real Panda over LCM: run (greedy or learning), record-demo (kinesthetic), refine"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -72,7 +86,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     demo_p.add_argument("--duration", type=float, default=15.0, help="recording length [s] (default 15)")
     demo_p.add_argument("--seed", type=int, default=0, help="object pose seed: where to place it (default 0)")
     demo_p.add_argument("--no-camera", action="store_true", help="record no perception")
-    for p in (run_p, demo_p):
+    refine_p = actions.add_parser("refine", help="refine a fitted skill's DMPs on the robot (Enter before each run)",
+                                  description="Refits each DMP so that the robot's executed path follows its "
+                                              "demonstration (iterative learning control, one run per step).")
+    refine_p.add_argument("--skill-dir", type=Path, required=True,
+                          help="a skill fitted with --fit tolerance (drake-skill fit's default)")
+    refine_p.add_argument("--demos", type=Path, required=True, help="the demonstrations the skill was fitted from")
+    refine_p.add_argument("--iterations", type=int, default=1,
+                          help="refinement steps per demonstration (default 1: two runs each)")
+    refine_p.add_argument("--out", type=Path, default=None,
+                          help="folder of the refined skill (default SKILL/hardware_refined)")
+    refine_p.add_argument("--force", action="store_true", help="replace a skill already in --out")
+    for p in (run_p, demo_p, refine_p):
         p.add_argument("--lcm-url", default=None, help="LCM URL (default: the config's, or LCM's default)")
         p.add_argument("--config", type=Path, help="HardwareConfig YAML (channels, URL, workspace, scenario)")
         p.add_argument("--yes", action="store_true", help="do not wait for Enter before each rollout")
@@ -227,8 +252,50 @@ def _record_demo(args) -> int:
     return 0
 
 
+def _refine(args) -> int:
+    from drake_skill.cli import errors
+    from drake_skill.cli.sim_robot import load_config
+    from drake_skill.demos.format import load_demonstrations
+    from drake_skill.learning.imitation import check_demo_pairs
+    from drake_skill.learning.refine import refine_on_robot, refinement_lines
+    from drake_skill.skill import Skill
+    from drake_skill.station.hardware.station import build_hardware_station
+
+    if args.iterations < 1:
+        raise ValueError(f"--iterations must be at least 1, got {args.iterations}")
+    errors.input_folder(args.skill_dir, "--skill-dir", "a fitted skill (drake-skill fit)")
+    errors.input_folder(args.demos, "--demos", "the demo_*.npz files the skill was fitted from")
+    out = args.out if args.out is not None else args.skill_dir / "hardware_refined"
+    if out.resolve() == args.skill_dir.resolve():
+        raise ValueError(f"--out {out}: is the fitted skill's own folder; choose another (it is never changed)")
+    if (out / "skill.json").exists() and not args.force:
+        raise FileExistsError(f"--out {out}: already holds a skill; pass --force to replace it")
+    skill = Skill.load(args.skill_dir)
+    demos = load_demonstrations(args.demos, skill=skill.name)
+    check_demo_pairs(skill, demos, f"--demos {args.demos}")
+    config = load_config(args.config, args.lcm_url, skill.name)
+    config.station.enable_camera = False           # the placed pose is the object frame: no camera needed
+    station = build_hardware_station(config)
+    runs = len(demos) * (args.iterations + 1)
+    print(f"refining {len(demos)} DMPs of {skill.name} on the robot: {runs} runs", flush=True)
+
+    def progress(i, n, name):
+        print(f"demonstration {i + 1} of {n}: {Path(str(name)).name}", flush=True)
+
+    report = refine_on_robot(skill, demos, station, args.iterations, progress=progress,
+                             prompt=_prompt(not args.yes))
+    lines, warnings = refinement_lines(report)
+    for line in lines:
+        print(line)
+    for warning in warnings:
+        print(f"warning: {warning}", file=sys.stderr)
+    skill.save(out, overwrite=args.force)
+    print(f"wrote {out}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
-    return _run(args) if args.action == "run" else _record_demo(args)
+    return {"run": _run, "record-demo": _record_demo, "refine": _refine}[args.action](args)
 
 
 def main(argv=None) -> int:

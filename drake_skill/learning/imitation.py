@@ -36,10 +36,12 @@ figures of ``drake-skill bench imitation`` are plain numpy
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses as dc
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -47,7 +49,7 @@ from drake_skill.action import metrics
 from drake_skill.action.dmp import Dmp, DmpConfig, integrate
 from drake_skill.demos.format import object_frame_poses
 
-__all__ = ["Imitation", "Imitator", "imitate", "imitation_metrics", "RECORD_HZ"]
+__all__ = ["Imitation", "Imitator", "check_demo_pairs", "imitate", "imitation_metrics", "RECORD_HZ"]
 
 #: Rate of an imitation's records [Hz]: the demonstrations' raw rate.
 RECORD_HZ = 100.0
@@ -206,6 +208,59 @@ class Imitator:
                 and 1.0 - abs(float(np.dot(drawn[3:], X_demo[3:]))) <= _POSE_MATCH_Q)
         return _X_from_vector(X_demo), same
 
+    @contextlib.contextmanager
+    def _placed(self, X_WO, drawn: bool):
+        """Within: the station's reset places the object at ``X_WO`` (when its seed draws another pose:
+        another scenario's draw, or the robot)."""
+        station = self.station
+        if not drawn:
+            station.random_object_pose = lambda _seed: X_WO
+        try:
+            yield
+        finally:
+            if not drawn:
+                del station.random_object_pose
+
+    def _start(self, weights, seed: int, goal, y0_demo, tau: float) -> np.ndarray:
+        """Resets the runner (object pose from ``seed``) and starts its DMP at the measured hand pose in O
+        toward ``goal`` over ``tau`` s; returns that start."""
+        runner = self.runner
+        runner.reset(weights, seed)
+        dmp_context = runner.dmp_system.GetMyMutableContextFromRoot(runner.context)
+        y0 = runner.dmp_system.get_dmp(dmp_context).y0.copy()   # measured hand pose in O at reset
+        if np.dot(y0[3:], goal[3:]) < 0:
+            y0[3:] *= -1
+        runner.dmp_system.set_start_goal(dmp_context, y0, goal, y0_demo=y0 if y0_demo is None else y0_demo)
+        runner.dmp_system.set_duration(dmp_context, tau)
+        return y0
+
+    def move_to_start(self, demo, speed: float = 0.1, min_duration: float = 2.0, within: float = 0.002) -> float:
+        """Moves the hand to ``demo``'s first pose in O and stops there; returns the distance [m].
+
+        On the robot a run starts wherever the previous one left the arm;
+        a refinement compares each run with the demonstration, so it first
+        brings the hand to the demonstration's start. The move is the DMP
+        with zero forcing term (the critically damped spring of thesis Eq.
+        3.3, at rest at both ends, within 0.1 % of the goal at tau) over
+        tau = max(``min_duration``, distance / ``speed``) s, then 0.5 s
+        still; a hand already ``within`` m of it does not move. Raises what
+        the station raises (the reflex, a stale status).
+        """
+        from drake_skill.station.recording import advance_station
+
+        runner = self.runner
+        goal = np.asarray(demo.X_OE_100hz[0], dtype=float)
+        X_WO, drawn = self._object_pose(demo)
+        with self._placed(X_WO, drawn):
+            y0 = self._start(np.zeros(runner.weights_shape), int(demo.seed), goal, None, 1.0)
+        distance = float(np.linalg.norm(goal[:3] - y0[:3]))
+        if distance <= within:
+            return distance
+        tau = max(float(min_duration), distance / float(speed))
+        runner.dmp_system.set_duration(runner.dmp_system.GetMyMutableContextFromRoot(runner.context), tau)
+        advance_station(runner.simulator, self.station, runner.context, tau + 0.5)
+        return distance
+
     def imitate(self, dmp: Dmp, demo) -> Imitation:
         """Runs ``dmp`` (weights, goal, tau) on ``demo``'s object pose; returns an :class:`Imitation`.
 
@@ -235,24 +290,14 @@ class Imitator:
         n = 0
         executed = dmp
         try:
-            if not drawn:
-                # Another scenario's draw or the robot: place the object where the demonstration had it.
-                station.random_object_pose = lambda _seed: X_WO
-            runner.reset(dmp.weights, seed)
-            dmp_context = runner.dmp_system.GetMyMutableContextFromRoot(runner.context)
-            y0 = runner.dmp_system.get_dmp(dmp_context).y0.copy()   # measured hand pose in O at reset
-            if np.dot(y0[3:], dmp.goal[3:]) < 0:
-                y0[3:] *= -1
-            runner.dmp_system.set_start_goal(dmp_context, y0, dmp.goal, y0_demo=dmp.demonstrated_start)
-            runner.dmp_system.set_duration(dmp_context, dmp.tau)
+            with self._placed(X_WO, drawn):
+                y0 = self._start(dmp.weights, seed, dmp.goal, dmp.demonstrated_start, dmp.tau)
             executed = dmp.with_start(y0)
             n = int(math.ceil((dmp.tau + runner.settle_time) * RECORD_HZ - 1e-9))
             advance_station(runner.simulator, station, runner.context, n / RECORD_HZ)
         except Exception as error:   # kept up to where it stopped
             failure = error
         finally:
-            if not drawn:
-                del station.random_object_pose
             logger.removeFilter(counter)
         records = runner.loggers.read(runner.context, n)
         try:
@@ -337,3 +382,16 @@ def imitation_metrics(config: DmpConfig, dmp: Dmp, demo, imitation: Imitation | 
         out.update(reflex_trips=imitation.reflex_trips, failed=bool(imitation.failed), reason=imitation.reason,
                    success=bool(imitation.success))
     return out
+
+
+def check_demo_pairs(skill, demos, where: str) -> None:
+    """Raises ValueError unless ``demos`` are the ones ``skill`` was fitted from (same count, each DMP's start
+    within 1 mm of its demonstration's); ``where`` names the folder in the message."""
+    if len(skill.dmps) != len(demos):
+        raise ValueError(f"{where}: {len(demos)} demonstrations, but the skill was fitted from {len(skill.dmps)}; "
+                         "give the folder it was fitted from as --demos")
+    for i, (dmp, demo) in enumerate(zip(skill.dmps, demos)):
+        gap = float(np.linalg.norm(dmp.y0[:3] - demo.X_OE[0, :3]))
+        if gap > 1e-3:
+            raise ValueError(f"{where}: {Path(demo.path or f'demo {i}').name} starts {1e3 * gap:.1f} mm from the "
+                             f"skill's DMP {i}; give the folder the skill was fitted from as --demos")
