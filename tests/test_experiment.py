@@ -223,16 +223,17 @@ def test_skills_are_names_or_skill_files(tmp_path):
         GridConfig(skills=(str(tmp_path / "nope.yaml"),)).validate()
 
 
-def test_a_grid_prepares_a_skill_with_learn_s_own_arguments(tmp_path):
-    """A grid with no ``--skill-dir`` records and fits each skill as ``drake-skill learn`` does,
-    with that command's parsed options: the scenario it records on is the skill's under
-    ``--scenario`` (a hand-built namespace once lacked ``--config`` and failed here)."""
-    from drake_skill.cli.learn import _station_config
-    from drake_skill.experiments.grid import learn_arguments
-    from drake_skill.skills import load_skill
+def test_a_grid_prepares_a_skill_on_the_skill_s_scenario_under_its_scenario_file(tmp_path):
+    """A grid with no ``--skill-dir`` records and fits each skill as ``drake-skill learn`` does
+    (``workflow.prepare``), on the skill's scenario under ``--scenario``, typed: no command's
+    flags (a hand-built namespace once lacked ``--config`` and failed here)."""
+    from drake_skill.experiments.grid import prepare_config
 
     (tmp_path / "near.yaml").write_text("object: {x: 0.62}\n")
-    args = learn_arguments("draw", tmp_path / "near.yaml", quiet=True)
-    assert (args.skill, args.config, args.station_config, args.quiet) == ("draw", None, tmp_path / "near.yaml", True)
-    assert _station_config(args, load_skill("draw")).object.x == 0.62
-    assert _station_config(learn_arguments("draw"), load_skill("draw")).object.x == 0.68
+    config = prepare_config("draw", tmp_path / "near.yaml", quiet=True)
+    assert (config.skill, config.quiet, config.fit, config.skill_dir, config.demos) == ("draw", True, "thesis",
+                                                                                       None, None)
+    assert config.station.object.x == 0.62
+    assert prepare_config("draw").station.object.x == 0.68
+
+

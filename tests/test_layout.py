@@ -89,3 +89,32 @@ def test_hardware_and_simulation_stations_stand_apart():
     for name in ("builder.py", "simulation.py"):
         assert not any(m.startswith("drake_skill.station.hardware") for m in simulated[name]), name
     assert any(m.startswith("drake_skill.station.hardware.config") for m in simulated["lcm_robot.py"])
+
+
+def _imported_modules(path: Path) -> set[str]:
+    """Every module ``path`` imports, at the top or inside a function (``from X import y``: X and X.y)."""
+    import ast
+
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.add(node.module)
+            names.update(f"{node.module}.{alias.name}" for alias in node.names)
+    return names
+
+
+def test_nothing_outside_the_commands_imports_them():
+    """The library never calls its CLI (issue 46 item 6): the workflows live in the library
+    (``drake_skill.workflow``, ``drake_skill.inputs``) and the commands parse flags into them."""
+    offenders = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if (PACKAGE / "cli") in path.parents:
+            continue
+        cli = sorted(m for m in _imported_modules(path) if m == "drake_skill.cli" or m.startswith("drake_skill.cli."))
+        if cli:
+            offenders[str(path.relative_to(PACKAGE))] = cli
+    assert offenders == {}
+    # The probe sees function-local imports (where the grid once imported drake-skill learn's code).
+    assert "drake_skill.workflow.prepare" in _imported_modules(PACKAGE / "experiments" / "grid.py")

@@ -196,7 +196,7 @@ def _fit(spec, demos, quiet: bool, refine: bool = True):
 
 def run(args) -> dict:
     """The JSON object of the benchmark (module docstring) for parsed ``args``."""
-    from drake_skill.cli import errors
+    from drake_skill import inputs as errors
     from drake_skill.learning.imitation import check_demo_pairs
 
     out = {}

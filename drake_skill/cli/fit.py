@@ -16,12 +16,12 @@ prints the goal model's summary, and writes SKILL_DIR:
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from drake_skill.cli import errors
+from drake_skill.workflow.prepare import fit_and_refine_report, print_fit_report
 
 NAME = "fit"
 HELP = "fit a skill (DMPs + goal model) from demonstrations"
@@ -48,27 +48,6 @@ def add_fit_argument(parser, help_prefix: str = "") -> None:
                              "file's dmp_bases), refined on the simulated station; 'thesis': the 10 Hz data, thesis "
                              "Table 6.1's bases, no refinement, as the committed chapter-7 grid "
                              "(docs/method.md section 2.2)")
-
-
-def print_fit_report(lines: list[str], warnings: list[str]) -> None:
-    """The fit's lines on stdout, each warning as one ``drake-skill: warning:`` line on stderr."""
-    print("\n".join(lines))
-    for message in warnings:
-        print(f"drake-skill: warning: {message}", file=sys.stderr)
-
-
-def fit_and_refine_report(skill, demos, station_config=None) -> tuple[list[str], list[str]]:
-    """Refines the freshly fitted ``skill`` (``SkillConfig.dmp_refine``) and returns the lines and
-    warnings that say what the fit chose and how closely each DMP follows its demonstration."""
-    from drake_skill.learning.refine import refine_skill, refinement_lines
-
-    lines, warnings = skill.fit_report()
-    if skill.config.dmp_refine > 0 and skill.config.dmp_data == "100hz":
-        print(f"refining the DMPs on the simulated station ({len(demos)} imitations x "
-              f"{skill.config.dmp_refine + 1}) ...")
-        more, warned = refinement_lines(refine_skill(skill, demos, station_config))
-        lines, warnings = lines + more, warnings + warned
-    return lines, warnings
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -176,67 +176,21 @@ def _print_config(args) -> None:
     print(yaml_dump_typed(effective), end="")
 
 
-def _save_demos(demos, directory: Path) -> None:
-    from drake_skill.demos import format as demo_format
-
-    if hasattr(demo_format, "save_demonstrations"):
-        demo_format.save_demonstrations(demos, directory, force=True)
-    else:  # pragma: no cover - older demos package
-        for i, demo in enumerate(demos):
-            demo_format.save_demonstration(demo, demo_format.demo_path(directory, i), force=True)
-
-
 def prepare_skill(args, out: Path) -> Path:
-    """The fitted skill's directory: --skill-dir, fitted from --demos, or recorded and fitted."""
-    from drake_skill.learning.evaluation import save_fitted_skill
-    from drake_skill.skill import Skill, default_skill_config, fit_skill
+    """The fitted skill's directory (:func:`drake_skill.workflow.prepare.prepare_skill` on the flags)."""
+    from drake_skill.workflow.prepare import PrepareConfig, prepare_skill as prepare
 
-    if args.skill_dir is not None and args.demos is not None:
-        raise ValueError("give --skill-dir or --demos, not both")
     spec = errors.skill(args.skill) if args.skill is not None else None
-    if args.skill_dir is not None:
-        skill = Skill.load(args.skill_dir)      # errors name the file
-        if spec is not None and spec.name != skill.name:
-            raise ValueError(f"--skill {args.skill} but {args.skill_dir} holds a '{skill.name}' skill")
-        return args.skill_dir
-    initial = out / "initial_skill"
-    if (initial / "skill.json").is_file() and args.demos is None:
-        skill = Skill.load(initial)
-        if spec is not None and spec.name != skill.name:
-            raise ValueError(f"{initial} holds a '{skill.name}' skill, not '{spec.name}'; use another --out")
-        print(f"using the skill fitted earlier: {initial}")
-        return initial
-    from drake_skill.demos.format import load_demonstrations
+    if spec is None and args.demos is not None and args.skill_dir is None:
+        from drake_skill.demos.format import load_demonstrations
 
-    if args.demos is not None:
-        demos = load_demonstrations(args.demos)
-        if not demos:
-            raise FileNotFoundError(f"{args.demos}: no demo_*.npz files; record some with "
-                                    "'drake-skill demos record'")
-        name = demos[0].skill
-        if spec is not None and spec.name != name:
-            raise ValueError(f"--skill {args.skill} but {args.demos} holds '{name}' demonstrations")
-        spec = spec if spec is not None else errors.skill(name, f"--demos {args.demos} (skill '{name}'; "
-                                                                "give its skill file as --skill)")
-    else:
-        from drake_skill.demos.demonstrator import ScriptedDemonstrator
-
-        if spec is None:
-            raise ValueError("--skill: missing; name the skill to learn (a shipped skill: drake-skill skills, "
-                             "or a skill file), or give --skill-dir or --demos")
-        name = spec.name
-        print(f"recording scripted demonstrations of '{name}' into {out / 'demos'} ...")
-        demonstrator = ScriptedDemonstrator(spec, station_config=_station_config(args, spec))
-        demos = demonstrator.record_many(progress=not args.quiet)
-        _save_demos(demos, out / "demos")
-    print(f"fitting '{name}' from {len(demos)} demonstrations ...")
-    skill = fit_skill(demos, default_skill_config(spec, fit=getattr(args, "fit", "tolerance")))
-    from drake_skill.cli.fit import fit_and_refine_report, print_fit_report
-    print_fit_report(*fit_and_refine_report(skill, demos, _station_config(args, spec)))
-    skill = save_fitted_skill(skill, initial, overwrite=True, station_config=_station_config(args, spec),
-                              progress=not args.quiet)
-    print(skill.summary())
-    return initial
+        demos = load_demonstrations(args.demos)     # the scenario is the skill's the demonstrations name
+        name = demos[0].skill if demos else ""
+        spec = errors.skill(name, f"--demos {args.demos} (skill '{name}'; give its skill file as --skill)") \
+            if demos else None
+    return prepare(PrepareConfig(skill=args.skill, skill_dir=args.skill_dir, demos=args.demos,
+                                 station=_station_config(args, spec) if spec is not None else None,
+                                 fit=getattr(args, "fit", "tolerance"), quiet=bool(args.quiet)), out)
 
 
 def run(args: argparse.Namespace) -> int:

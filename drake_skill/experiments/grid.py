@@ -39,6 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from drake_skill.fileio import atomic_write_json
+from drake_skill.inputs import station_config
 from drake_skill.learning.evaluation import HELD_OUT_SEED0
 from drake_skill.learning.loop import REWARDS, LearnConfig
 from drake_skill.learning.policy_search import METHODS
@@ -280,10 +281,10 @@ def execute_task(task: GridTask) -> dict:
 def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None = None,
                    station_yaml: Path | None = None, quiet: bool = False, fit: str = "thesis") -> dict[str, Path]:
     """Each skill's fitted skill ``OUT/SKILL/initial_skill``: recorded and fitted once
-    (``drake-skill learn``'s :func:`~drake_skill.cli.learn.prepare_skill`), or copied
+    (:func:`drake_skill.workflow.prepare.prepare_skill`, as ``drake-skill learn`` does), or copied
     from ``skill_dir`` (one skill only). ``sources``: {name: shipped name or skill file}."""
-    from drake_skill.cli.learn import prepare_skill
     from drake_skill.skill import Skill
+    from drake_skill.workflow.prepare import prepare_skill
 
     dirs = {}
     for skill, source in sources.items():
@@ -291,7 +292,7 @@ def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None
         if skill_dir is not None:
             _copy_skill(Path(skill_dir), initial, skill)
         else:
-            prepare_skill(learn_arguments(source, station_yaml, quiet, fit), Path(out) / skill)
+            prepare_skill(prepare_config(source, station_yaml, quiet, fit), Path(out) / skill)
         if Skill.load(initial).name != skill:
             raise ValueError(f"{initial} holds a '{Skill.load(initial).name}' skill, not '{skill}'; "
                              "use another --out")
@@ -299,17 +300,12 @@ def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None
     return dirs
 
 
-def learn_arguments(source: str, station_yaml: Path | None = None, quiet: bool = False, fit: str = "thesis"):
-    """``drake-skill learn --skill SOURCE [--scenario FILE] [--quiet]`` as its parser reads it:
-    every option :func:`~drake_skill.cli.learn.prepare_skill` reads is there, at its default."""
-    import argparse
+def prepare_config(source: str, station_yaml: Path | None = None, quiet: bool = False, fit: str = "thesis"):
+    """The :class:`~drake_skill.workflow.prepare.PrepareConfig` of ``drake-skill learn --skill SOURCE
+    [--scenario FILE] [--quiet] --fit FIT``: the skill's scenario under ``station_yaml``."""
+    from drake_skill.workflow.prepare import PrepareConfig
 
-    from drake_skill.cli.learn import add_arguments
-
-    parser = argparse.ArgumentParser()
-    add_arguments(parser)
-    return parser.parse_args(["--skill", str(source), *(["--scenario", str(station_yaml)] if station_yaml else []),
-                              *(["--quiet"] if quiet else []), "--fit", fit])
+    return PrepareConfig(skill=str(source), station=station_config(source, station_yaml), fit=fit, quiet=quiet)
 
 
 def _copy_skill(source: Path, initial: Path, skill: str) -> None:
@@ -438,7 +434,6 @@ def _execute(tasks, workers: int, use_ray: bool, ray_address, progress) -> None:
 
 def _runner_specs(out: Path, config: GridConfig, skill_dir, station_yaml, rollout_config, quiet: bool) -> dict:
     """Each skill's :class:`~drake_skill.learning.workers.RunnerSpec` (its fitted skill prepared)."""
-    from drake_skill.cli.errors import station_config
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec
 
