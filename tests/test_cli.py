@@ -142,3 +142,15 @@ def test_scenario_option_on_every_station_command(tmp_path, capsys):
         assert main([*argv, "--scenario", str(tmp_path / "none.yaml"), "--out", str(tmp_path / "o")]) == 2
         assert "no such file" in _one_error_line(capsys)
     assert not (tmp_path / "o").exists()
+
+
+def test_a_closed_pipe_ends_the_command_quietly():
+    """``drake-skill skills open | head -2``: the reader is gone before the command writes."""
+    import subprocess
+    import sys
+
+    child = subprocess.Popen([sys.executable, "-m", "drake_skill.cli.main", "skills", "open"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    child.stdout.close()          # as head does after its lines (here before the first one)
+    err = child.stderr.read().decode()
+    assert child.wait(timeout=60) == 0 and err == "", err

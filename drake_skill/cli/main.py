@@ -25,6 +25,7 @@ import argparse
 import importlib
 import importlib.util
 import logging
+import os
 import re
 import sys
 import traceback
@@ -144,6 +145,12 @@ def main(argv=None) -> int:
                 return int(e.code or 0)
             print(f"drake-skill: error: {e.code}", file=sys.stderr)
             return 2
+    except BrokenPipeError:
+        # The reader went away (``drake-skill skills FILE | head -2``): end quietly, as a
+        # filter does. Python's advice: point stdout at devnull, so that the flush at exit
+        # does not fail again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except UsageError as e:
         if verbose:
             traceback.print_exc()
