@@ -1,9 +1,11 @@
 """What every box shares, with no Drake import: the size of an object cloud, the
-camera's look-at pose, the counter of differential-IK warnings."""
+camera's look-at pose, the counter of differential-IK warnings, SIGTERM as an interrupt."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import signal
 
 import numpy as np
 
@@ -56,3 +58,24 @@ class IkWarningCounter(logging.Filter):
             self.count += 1
             return not self.suppress
         return True
+
+
+@contextlib.contextmanager
+def terminate_as_interrupt():
+    """Within: SIGTERM raises KeyboardInterrupt, as Ctrl-C does, so that the same handler keeps
+    what was finished (``kill PID`` of a recording). The previous handler is restored after;
+    only the main thread can install one (elsewhere this does nothing)."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(f"signal {signum}")
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

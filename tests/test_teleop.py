@@ -167,3 +167,59 @@ def test_idle_session_runs_60_s_without_a_solver_failure():
         session.record(seed=0, status=lambda *_: None)
     assert session.context.get_time() > 60.0
     assert session.mode() == IDLE
+
+
+def test_an_interrupted_teleoperation_keeps_its_finished_demonstration(tmp_path, capsys):
+    """After 1 of 2 demonstrations, Ctrl-C (or SIGTERM) keeps that one: with --force it replaces
+    the old set, and the folder lists (issue 51 item 1)."""
+    import signal
+
+    from drake_skill.cli.main import main
+    from drake_skill.demos.format import load_demonstrations
+    from drake_skill.demos.teleop import RecordingInterrupted, record_interactive_into
+    from drake_skill.skills import load_skill
+
+    station = load_skill("open").station_config()
+    station.enable_camera = False
+    station.success.above = -1.0          # any lid angle is a success: the judge is not under test
+    old = tmp_path / "open"
+    old.mkdir()
+    (old / "demo_000.npz").write_bytes(b"an old set")
+    (old / "demo_001.npz").write_bytes(b"an old set")
+    meshcat = Meshcat()
+    demos_done = []
+
+    def user(t):
+        if 0.3 <= t < 0.31:
+            click(meshcat, RECORD_BUTTON)
+        if 1.45 <= t < 1.46:
+            if demos_done:                       # the second demonstration: the user stops the program
+                signal.raise_signal(signal.SIGTERM)
+            click(meshcat, STOP_BUTTON)
+
+    config = TeleopConfig(realtime_rate=0.0, record_perception=False)
+    with pytest.raises(RecordingInterrupted, match="kept the 1 finished demonstration.*replace the old set"):
+        record_interactive_into(old, "open", 2, force=True, meshcat=meshcat, config=config, user=user,
+                                station_config=station, status=lambda line: demos_done.append(line)
+                                if "kept" in line else None)
+    (kept,) = load_demonstrations(old)
+    assert kept.metadata["source"] == "interactive" and kept.duration == pytest.approx(1.1)
+    assert not old.with_name(".open.recording").exists()
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL      # the handler is restored
+    assert main(["demos", "list", str(old)]) == 0
+    assert "demo_000.npz" in capsys.readouterr().out
+
+
+def test_a_staging_folder_left_by_a_killed_session_is_never_cleared(tmp_path):
+    from drake_skill.demos.format import DemoSetWriter
+
+    (tmp_path / "set").mkdir()
+    (tmp_path / "set" / "demo_000.npz").write_bytes(b"old")
+    (tmp_path / ".set.recording").mkdir()
+    with pytest.raises(FileExistsError, match="interrupted session; move them"):
+        DemoSetWriter(tmp_path / "set", force=True)
+    with pytest.raises(FileExistsError, match="pass --force"):
+        DemoSetWriter(tmp_path / "set")
+    writer = DemoSetWriter(tmp_path / "new")
+    assert writer.target == tmp_path / "new"
+    assert writer.interrupted() == f"kept the 0 finished demonstration(s) in {tmp_path / 'new'}"

@@ -14,6 +14,10 @@ file whose peak contact force or external joint torque passed 60 % of the
 reflex's limit (``drake_skill.demos.force_margin``). Existing demo files are never
 replaced without ``--force``; with it the whole set is replaced at once
 (an interruption leaves the old set or the new one, never a mix).
+Interactive recordings keep each successful demonstration on disk as it
+ends (with ``--force`` the new set grows in ``.OUT.recording`` beside the
+old one): Ctrl-C or SIGTERM keeps every finished one (replacing the old set
+once one is finished), says how many, and exits with status 130.
 
 list: a table of a folder's demonstrations (index, file, skill, duration,
 samples, ground-truth success, source).
@@ -175,7 +179,7 @@ def warn_force_margin(demos, paths, reflex) -> None:
 
 def record(args) -> int:
     from drake_skill.demos.demonstrator import DemonstratorConfig, load_demonstrator_config
-    from drake_skill.demos.format import existing_demo_files, save_demonstrations
+    from drake_skill.demos.format import existing_demo_files, load_demonstrations, save_demonstrations
 
     # Everything a user can get wrong is checked before the first simulation.
     if args.count < 0:
@@ -194,16 +198,26 @@ def record(args) -> int:
     seed = config.seed if args.seed is None else args.seed
     config = dc.replace(config, count=count, seed=seed, record_perception=not args.no_camera)
     if args.interactive:
-        from drake_skill.demos.teleop import TeleopConfig, record_interactive
-        demos = record_interactive(spec, count, seed=seed,
-                                   config=TeleopConfig(record_perception=not args.no_camera),
-                                   station_config=station_config)
+        from drake_skill.demos.teleop import RecordingInterrupted, TeleopConfig, record_interactive_into
+
+        def plot(tmp):
+            _plot(load_demonstrations(tmp), tmp / "demos.png")
+
+        try:
+            paths, demos = record_interactive_into(
+                args.out, spec, count, force=args.force, extra=plot, seed=seed,
+                config=TeleopConfig(record_perception=not args.no_camera), station_config=station_config)
+        except RecordingInterrupted as stop:
+            import sys
+
+            print(f"drake-skill: interrupted; {stop}", file=sys.stderr)
+            return 130
     else:
         from drake_skill.demos.demonstrator import ScriptedDemonstrator
         demos = ScriptedDemonstrator(spec, config, station_config=station_config).record_many(
             progress=not args.quiet)
-    paths = save_demonstrations(demos, args.out, force=args.force,
-                                extra=lambda tmp: _plot(demos, tmp / "demos.png"))
+        paths = save_demonstrations(demos, args.out, force=args.force,
+                                    extra=lambda tmp: _plot(demos, tmp / "demos.png"))
     print(table([(p.name, d) for p, d in zip(paths, demos)]))
     print(f"wrote {len(demos)} demonstration(s) to {args.out}/ and {args.out / 'demos.png'}")
     warn_force_margin(demos, paths, (station_config or spec.station_config()).reflex)

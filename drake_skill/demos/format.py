@@ -75,6 +75,7 @@ __all__ = [
     "MIN_SAMPLES",
     "N_POINTS",
     "Demonstration",
+    "DemoSetWriter",
     "DemonstrationError",
     "object_frame_poses",
     "downsample_action",
@@ -553,3 +554,67 @@ def append_demonstration(demo: Demonstration, directory, extra=None) -> Path:
             extra(tmp)
         fileio.atomic_write_json(tmp / MANIFEST, {"schema": "drake-skill-demonstration-set", "files": files})
     return target
+
+
+class DemoSetWriter:
+    """Keeps every demonstration as it is finished, so that an interruption loses none.
+
+    For recordings that cannot be repeated at will (a person at the
+    teleoperation page or the robot). Each :meth:`add` appends the
+    demonstration to the set on disk (:func:`append_demonstration`: one
+    swap, manifest updated). Into a folder with no demonstrations they go
+    straight there. Replacing a set (``force``) grows the new one in the
+    staging folder ``.NAME.recording`` beside it, so the old set stays whole
+    until the new one replaces it: at :meth:`finish`, or at
+    :meth:`interrupted` once at least one new demonstration is finished.
+    A staging folder left by a killed session is refused, never cleared
+    (it holds a person's finished demonstrations).
+    """
+
+    def __init__(self, directory, force: bool = False):
+        self.directory = Path(directory)
+        self.demos: list[Demonstration] = []
+        existing = existing_demo_files(self.directory)
+        if existing and not force:
+            raise FileExistsError(f"{self.directory} already holds {len(existing)} demonstration file(s); "
+                                  "pass --force to replace them or choose another --out")
+        self.staging = self.directory.with_name(f".{self.directory.name}.recording") if existing else None
+        if self.staging is not None and self.staging.exists():
+            raise FileExistsError(f"{self.staging}: holds the demonstrations of an interrupted session; move them "
+                                  f"elsewhere (they load with 'drake-skill demos list {self.staging}') or delete "
+                                  "the folder, then record again")
+
+    @property
+    def target(self) -> Path:
+        """Where the next demonstration is written."""
+        return self.directory if self.staging is None else self.staging
+
+    def add(self, demo: Demonstration) -> Path:
+        """Writes ``demo`` as the next file of the set being recorded; returns its path."""
+        path = append_demonstration(demo, self.target)
+        self.demos.append(demo)
+        return path
+
+    def finish(self, extra=None) -> list[Path]:
+        """The finished set in ``directory`` (replacing an old one as a whole), ``extra(tmp)`` beside it."""
+        paths = save_demonstrations(self.demos, self.directory, force=True, extra=extra)
+        self._drop_staging()
+        return paths
+
+    def interrupted(self) -> str:
+        """Keeps every finished demonstration in ``directory``; returns the sentence that says so."""
+        n = len(self.demos)
+        if self.staging is not None and n == 0:
+            self._drop_staging()
+            return f"no demonstration was finished; {self.directory} still holds its old set"
+        if self.staging is not None:
+            save_demonstrations(self.demos, self.directory, force=True)
+            self._drop_staging()
+            return f"kept the {n} finished demonstration(s) in {self.directory}; they replace the old set"
+        return f"kept the {n} finished demonstration(s) in {self.directory}"
+
+    def _drop_staging(self) -> None:
+        import shutil
+
+        if self.staging is not None and self.staging.exists():
+            shutil.rmtree(self.staging)

@@ -386,9 +386,14 @@ class TeleopSession:
 
 
 def record_interactive(skill, count: int, seed: int = 0, config: TeleopConfig | None = None,
-                       meshcat=None, status=print, station_config=None) -> list:
+                       meshcat=None, status=print, station_config=None, on_demo=None, user=None) -> list:
     """Records ``count`` successful interactive demonstrations (a failed one is repeated
-    on the next seed). Starts Meshcat if none is given and prints its URL."""
+    on the next seed). Starts Meshcat if none is given and prints its URL.
+
+    ``on_demo(demo)`` is called with each successful demonstration as it
+    ends (:func:`record_interactive_into` keeps it on disk there); ``user``
+    is passed to :meth:`TeleopSession.record` (tests drive the page with it).
+    """
     if meshcat is None:
         from pydrake.geometry import StartMeshcat
         meshcat = StartMeshcat()
@@ -398,10 +403,42 @@ def record_interactive(skill, count: int, seed: int = 0, config: TeleopConfig | 
     session = TeleopSession(skill, meshcat, config, station_config=station_config)
     demos = []
     while len(demos) < count:
-        demo = session.record(seed, status=status)
+        demo = session.record(seed, user=user, status=status)
         seed += 1
         if demo.success:
             demos.append(demo)
+            if on_demo is not None:
+                on_demo(demo)
+            status(f"demonstration {len(demos)} of {count} kept")
         else:
             status("not a success by the ground-truth judge; once more, on the next object pose")
     return demos
+
+
+class RecordingInterrupted(KeyboardInterrupt):
+    """An interactive recording stopped by Ctrl-C or SIGTERM after keeping what was finished;
+    ``str()`` says what was kept and where."""
+
+
+def record_interactive_into(directory, skill, count: int, force: bool = False, extra=None,
+                            **kwargs) -> tuple[list, list]:
+    """:func:`record_interactive` with every successful demonstration written to ``directory``
+    as it ends (:class:`~drake_skill.demos.format.DemoSetWriter`); returns ``(paths, demos)``.
+
+    ``force`` replaces a set already there (the new one grows beside it and
+    replaces it whole). Ctrl-C or SIGTERM keeps every finished demonstration
+    (replacing the old set once one is finished) and raises
+    :class:`RecordingInterrupted` saying how many were kept. ``extra(tmp)``
+    writes more files into the finished set (``demos record``'s plot);
+    ``kwargs`` go to :func:`record_interactive`.
+    """
+    from drake_skill.common import terminate_as_interrupt
+    from drake_skill.demos.format import DemoSetWriter
+
+    writer = DemoSetWriter(directory, force=force)
+    try:
+        with terminate_as_interrupt():
+            demos = record_interactive(skill, count, on_demo=writer.add, **kwargs)
+    except KeyboardInterrupt:
+        raise RecordingInterrupted(writer.interrupted()) from None
+    return writer.finish(extra=extra), demos
