@@ -1,5 +1,6 @@
 """What every box shares, with no Drake import: the size of an object cloud, the
-camera's look-at pose, the counter of differential-IK warnings, SIGTERM as an interrupt."""
+camera's look-at pose, Meshcat's view of the workspace, the counter of
+differential-IK warnings, SIGTERM as an interrupt."""
 
 from __future__ import annotations
 
@@ -79,3 +80,10 @@ def terminate_as_interrupt():
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+def frame_meshcat_camera(meshcat, object_xyz) -> None:
+    """Points Meshcat's camera at the robot and the object (robot base at the world origin):
+    from the front left, above, at the point halfway between them, 0.25 m up."""
+    target = 0.5 * np.asarray(object_xyz, dtype=float) + np.array([0.0, 0.0, 0.25])   # between base and object
+    meshcat.SetCameraPose(target + np.array([0.9, -1.3, 0.55]), target)

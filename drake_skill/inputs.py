@@ -80,7 +80,8 @@ def skill(value, option: str = "--skill"):
 
 def station_config(skill, scenario: Path | None):
     """The station of ``skill``: its shipped scenario, overridden by the user's ``--scenario`` YAML."""
-    from drake_skill.station.config import load_station_config, scenario_for_skill
+    from drake_skill.station.config import load_station_config
+    from drake_skill.skills import scenario_for_skill
 
     if scenario is None:
         return scenario_for_skill(skill)

@@ -19,7 +19,7 @@ SETTLE = 0.3
 
 
 def small_station(skill: str = "close"):
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
 
     config = scenario_for_skill(skill)
     config.camera.width, config.camera.height = 160, 120

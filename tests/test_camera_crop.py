@@ -31,8 +31,8 @@ from drake_skill.station.camera import (
     crop_camera_info,
     crop_window,
 )
-from drake_skill.station.config import scenario_for_skill
-from drake_skill.station.scripted import scripted_plan
+from drake_skill.skills import scenario_for_skill
+from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.sim.simulation import StationSimulation
 
 HAND_BODIES = ("panda_hand", "panda_leftfinger", "panda_rightfinger")

@@ -19,9 +19,9 @@ from drake_skill.demos.demonstrator import (
 from drake_skill.perception.systems import ObjectSegmenter, segmenter_config_for_station
 from drake_skill.station.pose_source import hold_plan
 from drake_skill.skills import keyframes, load_skill
-from drake_skill.station.scripted import scripted_plan
+from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.sim.simulation import StationSimulation
-from drake_skill.station.config import scenario_for_skill
+from drake_skill.skills import scenario_for_skill
 
 
 pytestmark = pytest.mark.usefixtures("quiet_differential_ik")

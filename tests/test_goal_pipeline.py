@@ -15,9 +15,9 @@ from drake_skill.perception.segmentation import fit_table_plane, process_frame
 from drake_skill.reward.systems import add_goal_pipeline
 from drake_skill.skill import default_skill_config, fit_skill
 from drake_skill.station.sim.builder import build_station
-from drake_skill.station.config import scenario_for_skill
+from drake_skill.skills import scenario_for_skill
 from drake_skill.station.pose_source import PoseTrajectorySource
-from drake_skill.station.scripted import scripted_plan
+from drake_skill.demos.scripted import scripted_plan
 
 DEMO_CONFIG = DemonstratorConfig(seed=0, pause_probability=0.0)
 

@@ -35,12 +35,12 @@ from drake_skill.demos.format import downsample_action
 from drake_skill.learning.rollout import ActionModel, RolloutConfig, RolloutRunner
 from drake_skill.station import limits
 from drake_skill.station.sim.builder import build_station
-from drake_skill.station.config import scenario_for_skill
+from drake_skill.skills import scenario_for_skill
 from drake_skill.station.hardware.station import (STATUS_CHECK_PERIOD, ReflexError, StaleStatusError, StatusMonitor,
                                           build_hardware_station)
 from drake_skill.station.hardware.config import HardwareConfig, load_hardware_config
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource
-from drake_skill.station.scripted import scripted_plan
+from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.sim.lcm_robot import DriverProtocolError, SimRobot
 from drake_skill.station.recording import pose_to_vector
 from drake_skill.station.sim.simulation import StationSimulation

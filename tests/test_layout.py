@@ -92,11 +92,16 @@ def test_hardware_and_simulation_stations_stand_apart():
 
 
 def _imported_modules(path: Path) -> set[str]:
-    """Every module ``path`` imports, at the top or inside a function (``from X import y``: X and X.y)."""
+    """Every module ``path`` imports, at the top or inside a function (``from X import y``: X and X.y);
+    not what an ``if TYPE_CHECKING:`` block imports for annotations."""
     import ast
 
+    tree = ast.parse(path.read_text(), filename=str(path))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and getattr(node.test, "id", getattr(node.test, "attr", "")) == "TYPE_CHECKING":
+            node.body = []
     names = set()
-    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+    for node in ast.walk(tree):
         if isinstance(node, ast.Import):
             names.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
@@ -118,3 +123,83 @@ def test_nothing_outside_the_commands_imports_them():
     assert offenders == {}
     # The probe sees function-local imports (where the grid once imported drake-skill learn's code).
     assert "drake_skill.workflow.prepare" in _imported_modules(PACKAGE / "experiments" / "grid.py")
+
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """drake_skill's modules and the package modules each imports (a package's ``__init__`` as the package)."""
+    modules = {}
+    for path in PACKAGE.rglob("*.py"):
+        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+        modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    graph = {}
+    for name, path in modules.items():
+        targets = set()
+        for imported in _imported_modules(path):
+            while imported and imported not in modules:
+                imported = imported.rpartition(".")[0]
+            if imported and imported != name:
+                targets.add(imported)
+        graph[name] = targets
+    return graph
+
+
+def test_no_import_cycles_counting_function_local_imports():
+    """Issue 46 item 6: the modules form layers; a function-local import does not hide a cycle."""
+    graph = _module_graph()
+    cycles, index, low, stack, on_stack = [], {}, {}, [], set()
+
+    def visit(v):                                     # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = set()
+            while not component or v not in component:
+                component.add(stack.pop())
+            on_stack.difference_update(component)
+            if len(component) > 1:
+                cycles.append({m: sorted(graph[m] & component) for m in sorted(component)})
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    assert cycles == []
+    # The probe follows function-local imports: scenarios of skills come from skills, not the station.
+    assert "drake_skill.skills" in graph["drake_skill.workflow.prepare"]
+    assert "drake_skill.skills" not in graph["drake_skill.station.config"]
+
+
+#: The package's layers, lowest first: a module imports only from its own layer or below.
+LAYERS = (
+    ("drake_skill", "common", "configs", "fileio", "resources"),   # Drake-free foundations
+    ("action",),                  # the DMP (math | DmpSystem)
+    ("perception",),              # segmenter, PCAE, features (math | systems)
+    ("reward", "station"),        # goal model and POMRP; the station (sim and hardware)
+    ("skills",),                  # skill files and scenarios as data
+    ("inputs", "demos", "skill"),  # input checks; demonstrations; a fitted skill
+    ("learning",),                # rollouts, policy search, the learning run, evaluation
+    ("workflow", "bench"),        # the commands' workflows; benchmarks
+    ("experiments",),             # the chapter-7 grid
+    ("cli",),                     # the commands
+)
+
+
+def test_every_import_goes_down_the_layers():
+    """Issue 46 item 6: the layer order (docs/architecture.md), function-local imports included."""
+    layer = {box: i for i, boxes in enumerate(LAYERS) for box in boxes}
+    graph = _module_graph()
+    boxes = {m.split(".")[1] if "." in m else "drake_skill" for m in graph}
+    assert boxes <= set(layer), f"a box with no layer: {sorted(boxes - set(layer))}"
+
+    def box(module):
+        return module.split(".")[1] if "." in module else "drake_skill"
+
+    upward = sorted(f"{a} -> {b}" for a, targets in graph.items() for b in targets if layer[box(b)] > layer[box(a)])
+    assert upward == []

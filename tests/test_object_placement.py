@@ -6,7 +6,7 @@ from pydrake.math import RollPitchYaw
 
 from drake_skill.learning.evaluation import HELD_OUT_SEED0
 from drake_skill.station.sim.builder import Station
-from drake_skill.station.config import scenario_for_skill
+from drake_skill.skills import scenario_for_skill
 
 
 def _station(skill="open", **object_changes):

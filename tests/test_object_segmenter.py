@@ -19,7 +19,8 @@ from drake_skill.perception.systems import (
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
 from drake_skill.perception.segmentation import fit_table_plane
 from drake_skill.station.sim.builder import build_station
-from drake_skill.station.config import StationConfig, scenario_for_skill
+from drake_skill.station.config import StationConfig
+from drake_skill.skills import scenario_for_skill
 
 
 class Rig:

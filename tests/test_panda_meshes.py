@@ -16,7 +16,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_skill.station.sim.builder import add_scene_plant
-from drake_skill.station.config import scenario_for_skill
+from drake_skill.skills import scenario_for_skill
 from drake_skill.station.models import add_package_paths, model_url, panda_illustration_table
 
 

@@ -7,9 +7,9 @@ import pytest
 from pydrake.math import RigidTransform
 
 from drake_skill.station import limits
-from drake_skill.station.config import scenario_for_skill
+from drake_skill.skills import scenario_for_skill
 from drake_skill.station.pose_source import PosePlan, hold_plan
-from drake_skill.station.scripted import scripted_plan
+from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.recording import ReflexError
 from drake_skill.station.sim.simulation import StationSimulation
 

@@ -10,8 +10,8 @@ from drake_skill.action.quaternion import make_quaternions_continuous
 from drake_skill.demos.format import downsample_action
 from drake_skill.learning.rollout import FAILURE_REASONS, ActionModel, RolloutConfig, RolloutRunner, classify_failure
 from drake_skill.skill import Skill
-from drake_skill.station.config import scenario_for_skill
-from drake_skill.station.scripted import scripted_plan
+from drake_skill.skills import scenario_for_skill
+from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.recording import DivergedError, ReflexError, SolverError, pose_to_vector
 from drake_skill.station.sim.simulation import StationSimulation
 

@@ -189,7 +189,7 @@ def test_a_rendered_flap_turned_from_the_light_stays_in_the_segment(flap_skill):
     (On the pose of seed 0 the default's least is 0.894 at 0.8 rad, where the flap's face
     reads value 0.03: no hue left to find.)"""
     from drake_skill.cli import errors
-    from drake_skill.perception.camera_check import check_camera
+    from drake_skill.skills.camera_check import check_camera
 
     spec = errors.skill(str(flap_skill))
     config = errors.station_config(spec, None)

@@ -38,7 +38,7 @@ def station_frames():
     """Per skill, per seed, the object camera's crop (what the ObjectSegmenter reads):
     (xyz (P, 3), rgb (P, 3), object pixel mask (H, W), X_WO 4x4, image shape, table mask (H, W))."""
     from drake_skill.station.sim.simulation import StationSimulation
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
 
     frames = {}
     for skill, bodies in OBJECT_BODIES.items():
@@ -64,7 +64,7 @@ def _yaw(X):
 def _scenario_segmentation(skill) -> SegmentationConfig:
     """The segmentation settings the skill's scenario gives the segmenter (Draw's footprint band)."""
     from drake_skill.perception.systems import segmenter_config_for_station
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
 
     return segmenter_config_for_station(scenario_for_skill(skill)).segmentation
 

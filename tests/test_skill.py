@@ -135,7 +135,7 @@ def _run_pipeline(skill, plan_for, seed, duration):
     from drake_skill.reward.systems import add_goal_pipeline
     from drake_skill.station.pose_source import PoseTrajectorySource
     from drake_skill.station.sim.builder import build_station
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
 
     builder = DiagramBuilder()
     station = builder.AddNamedSystem("station", build_station(scenario_for_skill("close")))
@@ -158,7 +158,7 @@ def _run_pipeline(skill, plan_for, seed, duration):
 def test_goal_pipeline_in_the_diagram_rewards_closing_over_parking(close_skill):
     """The ARCHITECTURE chain, simulated: a scripted Close earns a success verdict and a
     higher return per frame than the parked arm, from the camera alone."""
-    from drake_skill.station.scripted import scripted_plan
+    from drake_skill.demos.scripted import scripted_plan
 
     ok, R, G = _run_pipeline(close_skill, lambda X_WO, home: scripted_plan("close", X_WO, home), 21, 11.0)
     parked_ok, parked_R, parked_G = _run_pipeline(close_skill, lambda X_WO, home: hold_plan(home), 21, 5.0)

@@ -8,9 +8,10 @@ from pydrake.multibody.plant import MultibodyPlant
 
 from drake_skill.station.models import add_package_paths, model_url
 from drake_skill.station.pose_source import hold_plan
-from drake_skill.station.scripted import scripted_plan
+from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.sim.simulation import StationSimulation
-from drake_skill.station.config import StationConfig, load_station_config, scenario_for_skill
+from drake_skill.station.config import StationConfig, load_station_config
+from drake_skill.skills import scenario_for_skill
 from drake_skill.station.success import judge_success
 
 

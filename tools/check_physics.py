@@ -25,7 +25,7 @@ import time
 
 
 def _run(sim, skill, seed):
-    from drake_skill.station.scripted import scripted_plan
+    from drake_skill.demos.scripted import scripted_plan
 
     X_WO = sim.reset(seed)
     plan = scripted_plan(skill, X_WO, sim.home_pose())
@@ -41,7 +41,7 @@ def _run(sim, skill, seed):
 def check_skill(skill, seeds, reflex):
     import numpy as np
 
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
     from drake_skill.station.sim.simulation import StationSimulation
 
     results = {}
@@ -74,7 +74,7 @@ def check_skill(skill, seeds, reflex):
 
 
 def check_lid(offset_deg):
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
     from drake_skill.station.sim.simulation import StationSimulation
 
     config = scenario_for_skill("open")
@@ -97,7 +97,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     logging.getLogger("drake").setLevel(logging.ERROR)
 
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
 
     start = time.perf_counter()
     config = scenario_for_skill("open")

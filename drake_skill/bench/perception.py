@@ -45,9 +45,9 @@ def record_clouds(n_frames: int = 20, skill: str = "open", seed: int = 0, spacin
     """``n_frames`` clouds ``(xyz (P, 3) float32, rgb (P, 3) uint8)`` from the simulated
     station during the scripted ``skill``, one every ``spacing_s`` s from t = 0;
     also returns ``(image_shape, station_config)``."""
-    from drake_skill.station.scripted import scripted_plan
+    from drake_skill.demos.scripted import scripted_plan
     from drake_skill.station.sim.simulation import StationSimulation
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
 
     config = scenario_for_skill(skill)
     sim = StationSimulation(config)

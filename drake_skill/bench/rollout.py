@@ -123,7 +123,7 @@ def _runner(skill, perception: bool, camera: bool = True):
     perceived, goal pipeline), or the plant alone (ground-truth object frame, no
     perception systems; the camera built but never rendered, or not built)."""
     from drake_skill.learning.rollout import RolloutConfig, RolloutRunner
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
 
     station_config = scenario_for_skill(skill.name)
     station_config.enable_camera = camera

@@ -17,9 +17,9 @@ import time
 
 
 def _rtf(with_camera: bool, duration: float, seed: int) -> float:
-    from drake_skill.station.scripted import scripted_plan
+    from drake_skill.demos.scripted import scripted_plan
     from drake_skill.station.sim.simulation import StationSimulation
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
 
     config = scenario_for_skill("open")
     config.enable_camera = with_camera

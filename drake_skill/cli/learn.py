@@ -107,7 +107,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _station_config(args, skill):
     """The skill's scenario, under the --config file's ``station`` and then --scenario."""
     from drake_skill.configs import load_typed
-    from drake_skill.station.config import load_station_config, scenario_for_skill, validate_station_config
+    from drake_skill.station.config import load_station_config, validate_station_config
+    from drake_skill.skills import scenario_for_skill
 
     station = scenario_for_skill(skill)
     if args.config is not None:

@@ -67,7 +67,16 @@ def run(args: argparse.Namespace) -> int:
     from drake_skill.cli import errors
     from drake_skill.station.sim.lcm_robot import SimRobot
 
-    robot = SimRobot(config, guide=errors.skill(args.skill) if args.guide else None)
+    guide = None
+    if args.guide:
+        from drake_skill.demos.demonstrator import DemonstratorConfig, humanlike_plan
+
+        spec = errors.skill(args.skill)
+
+        def guide(X_WO, X_WE_home, seed):
+            """The skill's scripted, human-like demonstration for the run's seed."""
+            return humanlike_plan(spec, X_WO, X_WE_home, seed, DemonstratorConfig())[0]
+    robot = SimRobot(config, guide=guide)
     url = config.lcm_url or "(LCM default)"
     print(f"sim-robot: {args.skill} scenario on {url}: commands {config.command_channel}, "
           f"status {config.status_channel}, hand {config.hand_command_channel}"

@@ -9,7 +9,7 @@
 joint at ``--joints`` values across its limits on ``--poses`` seeded object
 poses, and reports the least fraction of the object's visible pixels (the
 renderer's label image) that the segment keeps, and where
-(drake_skill/perception/camera_check.py). Run it before recording. ``--json``:
+(drake_skill/skills/camera_check.py). Run it before recording. ``--json``:
 ``{"skill", "kept_fraction_min", "at_joint", "at_pose": [x, y, yaw], "frames"}``.
 
 A skill is data (docs/skills.md): a YAML file naming its scenario, how many
@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
 def check_camera(args: argparse.Namespace) -> int:
     """``--check-camera``: the table, or one JSON object with ``--json``."""
     from drake_skill.cli import errors
-    from drake_skill.perception import camera_check
+    from drake_skill.skills import camera_check
 
     if args.skill is None:
         raise ValueError("--check-camera: give a skill (a shipped skill's name or a skill file)")

@@ -30,7 +30,7 @@ HELP = "scripted Open/Close/Draw in the simulated station"
 def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, scenario: Path | None = None) -> dict:
     from drake_skill.fileio import new_figure
 
-    from drake_skill.station.scripted import scripted_plan
+    from drake_skill.demos.scripted import scripted_plan
     from drake_skill.station.sim.simulation import StationSimulation
     from drake_skill.station.success import rule_text
     skills = [errors.skill(skill, "--skills") for skill in skills]

@@ -8,7 +8,7 @@ camera at 10 Hz; here the segmented object's points, see below).
 Frames and units (SI: m, rad, s):
 
 * W: world frame of the station (robot base at the origin, z up).
-* O: object frame (see ``drake_skill.station.scripted``): origin at the centre of the
+* O: object frame (see ``drake_skill.demos.scripted``): origin at the centre of the
   object's bottom face, x away from the robot, z up.
 * E: the hand's tool centre point (the station's ``ee_pose`` port).
 * Poses are 7-vectors ``[x, y, z, qw, qx, qy, qz]``: translation [m] and unit

@@ -35,9 +35,9 @@ def replay_html(demo: Demonstration, station_config=None, meshcat=None) -> str:
     from pydrake.math import RigidTransform
     from pydrake.systems.framework import DiagramBuilder
 
-    from drake_skill.learning.loop import frame_meshcat_camera
+    from drake_skill.common import frame_meshcat_camera
     from drake_skill.station.sim.builder import add_scene_plant
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
 
     config = station_config if station_config is not None else scenario_for_skill(demo.skill)
     meshcat = meshcat if meshcat is not None else Meshcat()

@@ -45,6 +45,8 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 
+from drake_skill.common import frame_meshcat_camera
+
 
 IDLE, RECORDING, DONE = 0, 1, 2
 MODE_NAMES = {IDLE: "idle", RECORDING: "recording", DONE: "done"}
@@ -318,6 +320,7 @@ class TeleopSession:
         self.diagram.SetDefaultContext(self.context)
         self.context.SetTime(0.0)
         self.X_WO = self.station.reset(self.context, seed)
+        frame_meshcat_camera(self.meshcat, self.X_WO.translation())   # the view opens on the workspace
         self.teleop.add_controls()
         self.simulator.Initialize()
         self.simulator.AdvanceTo(0.0)

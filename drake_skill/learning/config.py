@@ -11,7 +11,6 @@ import typing
 from typing import Any
 
 from drake_skill import configs
-from drake_skill.learning.evaluation import HELD_OUT_SEED0
 from drake_skill.learning.policy_search import METHODS
 
 __all__ = ["LearnConfig", "REWARDS"]
@@ -19,7 +18,12 @@ __all__ = ["LearnConfig", "REWARDS"]
 REWARDS = ("dense", "sparse")
 
 
-def _valid_exploration_scale(value) -> bool:
+#: Seed of the first held-out pose (drake_skill.learning.evaluation): far from the
+#: learning rollouts' seeds, so no held-out pose is a learning pose.
+HELD_OUT_SEED0 = 900_000
+
+
+def valid_exploration_scale(value) -> bool:
     """An exploration scale is a finite factor in (0, 100] on Sigma_b^0."""
     return math.isfinite(value) and 0 < value <= 100
 
@@ -79,7 +83,7 @@ class LearnConfig:
             bad("greedy_every", self.greedy_every, "at least 1 (a greedy execution after every n-th update)")
         if int(self.held_out) < 0:
             bad("held_out", self.held_out, "0 (off) or a number of poses")
-        if self.exploration_scale is not None and not _valid_exploration_scale(self.exploration_scale):
+        if self.exploration_scale is not None and not valid_exploration_scale(self.exploration_scale):
             bad("exploration_scale", self.exploration_scale, "a factor in (0, 100] on Sigma_b^0")
         return self
 

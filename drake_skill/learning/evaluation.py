@@ -22,12 +22,12 @@ from typing import Any, Callable
 
 import numpy as np
 
+from drake_skill.learning.config import HELD_OUT_SEED0   # the held-out poses' first seed
+
 __all__ = ["CHOICE_SEED0", "HELD_OUT_SEED0", "apply_initial_rule", "best_return_index", "choose_initial_dmp",
            "evaluate_greedy", "evaluate_skill", "evaluation_table", "exploration_table", "explore_skill",
            "results_report", "save_fitted_skill"]
 
-#: First seed of the held-out object poses (drake-skill learn and evaluate use the same).
-HELD_OUT_SEED0 = 900_000
 
 #: First seed of the object poses a skill's initial DMP is chosen on (``initial_dmp: best-return``):
 #: below the held-out ones, and a training rollout's pose seed is a 31-bit draw (``pose_seed``).
@@ -225,7 +225,7 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     median, max, standard deviation), ground-truth successes, final object
     states and failures by reason.
     """
-    from drake_skill.learning.config import _valid_exploration_scale
+    from drake_skill.learning.config import valid_exploration_scale
     from drake_skill.learning.policy_search import make_policy_search
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec, make_pool
@@ -238,7 +238,7 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     rollout_config = (rollout_config or RolloutConfig()).validate()
     if exploration_scale is None:
         exploration_scale = float(skill.spec.exploration_scale)
-    if not _valid_exploration_scale(exploration_scale):
+    if not valid_exploration_scale(exploration_scale):
         raise ValueError(f"exploration_scale: expected a factor in (0, 100] on Sigma_b^0, got {exploration_scale!r}")
     samples = make_policy_search("pi2-es-cov", skill.initial_weights, exploration_scale * skill.sigma0,
                                  seed=int(seed0)).ask(int(rollouts))

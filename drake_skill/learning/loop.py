@@ -68,6 +68,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from drake_skill.common import frame_meshcat_camera
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, atomic_write_text, load_npz
 from drake_skill.learning.config import REWARDS, LearnConfig
 from drake_skill.learning.evaluation import HELD_OUT_SEED0, evaluate_greedy
@@ -76,7 +77,7 @@ from drake_skill.learning.policy_search import PER_STEP_METHODS, make_policy_sea
 from drake_skill.learning.runlog import RunLog, software_versions
 
 __all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "REWARDS", "LearnConfig", "LearnOutcome", "LearningRun", "RunState",
-           "episode_rewards", "frame_meshcat_camera", "learn", "pose_seed"]
+           "episode_rewards", "learn", "pose_seed"]
 
 #: What a learning run writes into its output directory (and ``tensorboard/`` where the
 #: ``tensorboard`` package is installed).
@@ -153,12 +154,6 @@ def exploration_size(search) -> float:
     """RMS standard deviation of the sampling distribution: sqrt(mean_b trace(s Sigma_b) / D)."""
     cov = search.sampling_covariances
     return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2)) / cov.shape[-1]))
-
-
-def frame_meshcat_camera(meshcat, object_xyz) -> None:
-    """Points Meshcat's camera at the robot and the object (robot base at the world origin)."""
-    target = 0.5 * np.asarray(object_xyz, dtype=float) + np.array([0.0, 0.0, 0.25])   # between base and object
-    meshcat.SetCameraPose(target + np.array([0.9, -1.3, 0.55]), target)
 
 
 @dc.dataclass

@@ -20,7 +20,8 @@ user's file, and every command that takes ``--skill`` goes through it.
 
 from __future__ import annotations
 
-from drake_skill.skills.spec import (Keyframe, SkillSpec, keyframes, load_skill, shipped_skill_names,
-                                     shipped_skills)
+from drake_skill.skills.spec import (Keyframe, SkillSpec, keyframes, load_skill, scenario_for_skill,
+                                     shipped_skill_names, shipped_skills)
 
-__all__ = ["Keyframe", "SkillSpec", "keyframes", "load_skill", "shipped_skill_names", "shipped_skills"]
+__all__ = ["Keyframe", "SkillSpec", "keyframes", "load_skill", "scenario_for_skill", "shipped_skill_names",
+           "shipped_skills"]

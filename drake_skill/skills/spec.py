@@ -257,3 +257,9 @@ def load_skill(skill) -> SkillSpec:
             raise
         raise ValueError(f"{where}: scenario {spec.scenario}: {e}") from None
     return spec
+
+
+def scenario_for_skill(skill) -> StationConfig:
+    """The scenario of a skill (a shipped skill's name, a skill file's path or a
+    :class:`SkillSpec`) with the skill's success rule."""
+    return load_skill(skill).station_config()

@@ -8,7 +8,7 @@ the table and its joint physics, the contact parameters of every surface, the
 camera (Drake's ``CameraConfig``), the controller, the collision reflex and
 the success rule; code never hard-codes them. The scenes of the shipped
 skills are YAML files in ``drake_skill/station/scenarios/``, and a skill file
-names its scene (:func:`scenario_for_skill` gives a skill's scene with the
+names its scene (:func:`drake_skill.skills.scenario_for_skill` gives a skill's scene with the
 skill's success rule); a user's own file loads with :func:`load_station_config`. Units are SI (m, rad, s, kg, N).
 ``load_station_config`` turns every problem into a ``ValueError`` that names
 the offending field.
@@ -559,11 +559,3 @@ def validate_success(rule: SuccessConfig, field: str = "success", what: str = "s
     if not (math.isfinite(float(rule.settle_time)) and 0.0 <= rule.settle_time <= 60.0):
         _bad(f"{field}.settle_time", rule.settle_time, "a duration in [0, 60] s")
     return rule
-
-
-def scenario_for_skill(skill) -> StationConfig:
-    """The scenario of a skill (a shipped skill's name, a skill file's path or a
-    :class:`~drake_skill.skills.SkillSpec`) with the skill's success rule."""
-    from drake_skill.skills import load_skill
-
-    return load_skill(skill).station_config()

@@ -8,10 +8,13 @@ scenario, the nominal pose X_WO and the seeded random poses around it.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from drake_skill.station.config import StationConfig
+if TYPE_CHECKING:   # annotations only: station.config validates a scenario with object_parts
+    from drake_skill.station.config import StationConfig
 
 
 def nominal_object_pose(config: StationConfig) -> RigidTransform:

@@ -100,7 +100,7 @@ def prepare_skill(config: PrepareConfig, out: Path) -> Path:
     there from recorded demonstrations is used again, so a resumed run fits once)."""
     from drake_skill.learning.evaluation import save_fitted_skill
     from drake_skill.skill import Skill, default_skill_config, fit_skill
-    from drake_skill.station.config import scenario_for_skill
+    from drake_skill.skills import scenario_for_skill
 
     if config.skill_dir is not None and config.demos is not None:
         raise ValueError("give --skill-dir or --demos, not both")

@@ -199,11 +199,12 @@ class SimRobot:
             an LcmSubscriberSystem (its serializer is called with the GIL)
             is safe.
         expire_sec: the driver's ``--expire_sec``.
-        guide: a skill (name, skill file or SkillSpec): instead of following commands, the arm is moved
-            through that skill's scripted, human-like demonstration
-            (``drake_skill.demos.demonstrator.humanlike_plan`` for the run's
-            seed) by an end-effector controller of its own: a person guiding
-            the compliant arm, for recording kinesthetic demonstrations.
+        guide: ``guide(X_WO, X_WE_home, seed) -> PosePlan``: instead of following commands, the arm
+            is moved through that plan by an end-effector controller of its
+            own: a person guiding the compliant arm, for recording
+            kinesthetic demonstrations (``drake-skill sim-robot --guide``
+            passes a skill's scripted, human-like demonstration,
+            ``drake_skill.demos.demonstrator.humanlike_plan``).
     """
 
     def __init__(self, config: HardwareConfig | None = None, lcm: DrakeLcm | None = None,
@@ -326,11 +327,8 @@ class SimRobot:
         self._interp.set_initial_position(self._interp.GetMyMutableContextFromRoot(self.context),
                                           self.station.config.q_home)
         if self.guide is not None:
-            from drake_skill.demos.demonstrator import DemonstratorConfig, humanlike_plan
-
             home = self.station.GetOutputPort("ee_pose").Eval(self.station_context())
-            plan, _ = humanlike_plan(self.guide, self.X_WO, home, 0 if seed is None else int(seed),
-                                     DemonstratorConfig())
+            plan = self.guide(self.X_WO, home, 0 if seed is None else int(seed))
             self._guide_source.set_plan(self._guide_source.GetMyMutableContextFromRoot(self.context), plan)
             self._guide_controller.set_joint_positions(self.context, self.station.config.q_home)
             self.guide_duration = plan.duration
