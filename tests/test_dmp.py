@@ -707,3 +707,20 @@ def test_every_demonstration_is_put_on_the_first_ones_hemisphere(first_sign):
             np.testing.assert_allclose(dmp.y0[3:], first_sign * q, atol=1e-12)
             np.testing.assert_allclose(dmp.goal[3:], first_sign * q, atol=1e-12)
         np.testing.assert_allclose(fit.dmps[1].weights, fit.dmps[0].weights, atol=1e-9)
+
+
+
+def test_the_orientation_amplitude_is_the_rotation_from_start_to_goal_in_the_world():
+    """UDE's orientation amplitude 2 log(g * conj(q0)) (docs/method.md 2.1) against scipy's
+    rotation vector of R_g R_0^-1, for a start and a goal that do not commute (about one axis
+    the product's order does not matter, and a swapped order went uncaught)."""
+    from scipy.spatial.transform import Rotation
+
+    r0, rg = Rotation.from_euler("xyz", [0.4, -0.3, 0.2]), Rotation.from_euler("xyz", [-0.5, 0.6, 1.1])
+    assert not np.allclose((rg * r0.inv()).as_rotvec(), (r0.inv() * rg).as_rotvec(), atol=0.05)
+    wxyz = [np.roll(r.as_quat(), 1) for r in (r0, rg)]
+    y0 = np.concatenate([[0.1, 0.2, 0.3], wxyz[0]])
+    goal = np.concatenate([[0.4, -0.2, 0.5], wxyz[1]])
+    a = forcing_amplitude(y0, goal, DmpConfig(quaternion="ude", scale_by_amplitude=True))
+    np.testing.assert_allclose(a[:3], goal[:3] - y0[:3])
+    np.testing.assert_allclose(a[3:], (rg * r0.inv()).as_rotvec(), atol=1e-12)

@@ -2,6 +2,7 @@
 hand-made cells: no simulation. The verdicts in ``results.md`` are decided here."""
 
 import numpy as np
+import pytest
 
 from drake_skill.experiments.report import Cell, claims, combine, compare, compare_spread
 
@@ -64,3 +65,18 @@ def test_the_three_claims_on_cells_made_to_decide_them():
     assert v3 == "holds", lines3
     assert len(lines3) == 3 and all(line.endswith("better") for line in lines3)
     assert "highest (held-out after): pi2-es-cov vs the best other, power: 1.00 ± 0.00 vs 0.55" in lines3[1]
+
+
+
+def test_the_spread_test_is_brown_forsythe_not_levene_s_mean_centred_one():
+    """Brown-Forsythe: the one-way ANOVA of |x - median(x)|, computed here independently. On these
+    runs Levene's mean-centred test (p = 0.026) would call the spread lower; Brown-Forsythe
+    (p = 0.091) does not (issue 47: the swap went uncaught)."""
+    from scipy import stats
+
+    a = [0.67, 0.86, 0.86, 0.93, 0.72, 0.97]
+    b = [0.41, 0.97, 0.37, 0.28, 0.57, 0.97]
+    p = stats.f_oneway(np.abs(np.subtract(a, np.median(a))), np.abs(np.subtract(b, np.median(b)))).pvalue
+    assert p == pytest.approx(0.0913, abs=1e-4)
+    verdict, text = compare_spread(a, b)
+    assert verdict == "unclear" and f"Brown-Forsythe p = {p:.3f}" in text

@@ -95,6 +95,9 @@ def test_a_users_skill_file_loads_with_its_scenario_relative_to_it(tmp_path):
     (dict(text="name: push\nscenario: drawer\ninitial_dmp_poses: 0\n"), "initial_dmp_poses"),
     (dict(text="name: push\nscenario: drawer\ndmp_unscaled_dims: [0, 7]\n"), "dmp_unscaled_dims"),
     (dict(text="name: push\nscenario: drawer\ndmp_unscaled_dims: [1, 1]\n"), "dmp_unscaled_dims"),
+    # A keyframe time that repeats the previous one (issue 47: a `>=` for `>` went uncaught).
+    (dict(text=SKILL.format(name="push", scenario="drawer", joint="drawer_slide", rule="above: 0.05",
+                            p1="[-0.2, 0.0, 0.3]").replace("t: 2.0", "t: 1.0")), "keyframes[1].t"),
 ])
 def test_a_bad_skill_file_is_one_line_naming_the_file_and_the_field(tmp_path, changes, field):
     path = _write(tmp_path, **changes)
