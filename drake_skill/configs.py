@@ -4,7 +4,9 @@ Every configuration of drake-skill is a dataclass loaded from YAML by Drake's
 ``yaml_load_typed`` (:func:`load_typed`) and checked by its ``validate``,
 which raises through :func:`bad`. Both raise ``ValueError`` with one line:
 
-    <what> (<file or YAML>): <Drake's message>                   (parse errors, unknown keys)
+    <what> (<file or YAML>): field '<a.b>': unknown key '<k>'; valid keys: ...; did you mean '<x>'?
+    <what> (<file or YAML>): field '<a.b>' = <value>: expected <type>  (a value of the wrong type)
+    <what> (<file or YAML>): <Drake's message>                   (other parse errors)
     <what> field '<field>' = <value>: expected <what would work>   (values that cannot work)
 
 The import of pydrake happens inside :func:`load_typed`, so the Drake-free
@@ -46,5 +48,117 @@ def load_typed(schema, *, what: str, path: str | Path | None = None, data: str |
     try:
         return yaml_load_typed(schema=schema, filename=None if path is None else str(path), data=data,
                                defaults=defaults if defaults is not None else schema())
-    except (RuntimeError, yaml.YAMLError) as e:
-        raise ValueError(f"{what} ({where}): {' '.join(str(e).split())}") from None
+    except (RuntimeError, ValueError, TypeError, yaml.YAMLError) as e:
+        text = path.read_text() if path is not None else data
+        found = _diagnose(schema, text)
+        raise ValueError(f"{what} ({where}): {found or ' '.join(str(e).split())}") from None
+
+
+# ------------------------------------------------------------------ diagnosis
+# Drake's messages name neither the field of a wrong type ("invalid literal for int()")
+# nor the keys that would be valid ("The fields ['x'] were unknown to the schema"). After
+# yaml_load_typed fails, the YAML is walked against the schema's fields to say which.
+
+
+def _plain_loader():
+    """A safe YAML loader that reads Drake's tags (!Rpy, !Uniform, ...) as plain nodes."""
+    import yaml
+
+    class Loader(yaml.SafeLoader):
+        pass
+
+    def untagged(loader, suffix, node):
+        if isinstance(node, yaml.MappingNode):
+            return {"__tag__": suffix, **loader.construct_mapping(node, deep=True)}
+        if isinstance(node, yaml.SequenceNode):
+            return loader.construct_sequence(node, deep=True)
+        return loader.construct_scalar(node)
+
+    Loader.add_multi_constructor("!", untagged)
+    return Loader
+
+
+def _fields(schema) -> dict | None:
+    """{name: type} of a dataclass or a Drake config struct (``__fields__``); None for other types."""
+    import dataclasses as dc
+    import typing
+
+    if dc.is_dataclass(schema):
+        try:
+            hints = typing.get_type_hints(schema)
+        except Exception:   # an annotation that does not resolve: names only
+            hints = {}
+        return {f.name: hints.get(f.name) for f in dc.fields(schema)}
+    if isinstance(getattr(schema, "__fields__", None), (list, tuple)):
+        return {f.name: getattr(f, "type", None) for f in schema.__fields__}
+    return None
+
+
+def _unknown_key(field: str, key: str, valid) -> str:
+    import difflib
+
+    near = difflib.get_close_matches(key, list(valid), n=1)
+    return (f"field '{field or '(top level)'}': unknown key '{key}'; valid keys: {', '.join(valid)}"
+            + (f"; did you mean '{near[0]}'?" if near else ""))
+
+
+_SCALARS = {int: "an integer", float: "a number", str: "a string", bool: "true or false"}
+
+
+def _wrong_scalar(kind, value) -> bool:
+    if kind is bool:
+        return not isinstance(value, bool)
+    if kind is int:
+        return isinstance(value, bool) or not isinstance(value, int)
+    if kind is float:
+        return isinstance(value, bool) or not isinstance(value, (int, float))
+    return not isinstance(value, str)
+
+
+def _check(kind, value, field: str) -> str | None:
+    """The first problem of ``value`` (parsed YAML) against type ``kind``, or None."""
+    import typing
+
+    if kind is None or value is None:
+        return None
+    origin, args = typing.get_origin(kind), typing.get_args(kind)
+    if origin is typing.Union:
+        options = [a for a in args if a is not type(None)]
+        return _check(options[0], value, field) if len(options) == 1 else None
+    if origin in (list, tuple) and isinstance(value, list) and args:
+        for i, item in enumerate(value):
+            found = _check(args[0], item, f"{field}[{i}]")
+            if found:
+                return found
+        return None
+    if origin is dict and isinstance(value, dict) and len(args) == 2:
+        for key, item in value.items():
+            found = _check(args[1], item, f"{field}.{key}")
+            if found:
+                return found
+        return None
+    if kind in _SCALARS:
+        return f"field '{field}' = {value!r}: expected {_SCALARS[kind]}" if _wrong_scalar(kind, value) else None
+    fields = _fields(kind)
+    if fields is None or not isinstance(value, dict) or "__tag__" in value:
+        return None
+    for key, item in value.items():
+        if key not in fields:
+            return _unknown_key(field, str(key), fields)
+        found = _check(fields[key], item, f"{field}.{key}" if field else str(key))
+        if found:
+            return found
+    return None
+
+
+def _diagnose(schema, text: str | None) -> str | None:
+    """Which field of YAML ``text`` does not fit ``schema`` (an unknown key or a wrong type), or None."""
+    import yaml
+
+    try:
+        value = yaml.load(text or "", Loader=_plain_loader())
+    except yaml.YAMLError:
+        return None
+    if not isinstance(value, dict):
+        return None
+    return _check(schema, value, "")

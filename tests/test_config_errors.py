@@ -1,0 +1,50 @@
+"""A YAML field of the wrong type or an unknown key names the file, the field and the fix
+(issue 47 item 1): the valid keys and the nearest one, in dataclasses and Drake's config
+structs alike, at any depth."""
+
+import pytest
+
+from drake_skill.cli.main import main
+from drake_skill.configs import load_typed
+from drake_skill.learning.config import LearnConfig
+from drake_skill.station.config import StationConfig
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("object: {x: 0.6, yy: 1}\n", "field 'object': unknown key 'yy'; valid keys: model, base_body, joint, x, y, "),
+    ("object: {yy: 1}\n", "did you mean 'y'?"),
+    ("camera: {fps: ten}\n", "field 'camera.fps' = 'ten': expected a number"),
+    ("plant: {time_stepp: 0.001}\n", "field 'plant': unknown key 'time_stepp'; valid keys: time_step, "),
+    ("plant: {time_stepp: 0.001}\n", "did you mean 'time_step'?"),
+    ("reflex: {enabled: maybe}\n", "field 'reflex.enabled' = 'maybe': expected true or false"),
+    ("q_home: [0, 0, zero, 0, 0, 0, 0]\n", "field 'q_home[2]' = 'zero': expected a number"),
+    ("objekt: {}\n", "field '(top level)': unknown key 'objekt'; valid keys: "),
+])
+def test_a_station_field_of_the_wrong_type_or_name_is_named(tmp_path, text, expected):
+    path = tmp_path / "scene.yaml"
+    path.write_text(text)
+    with pytest.raises(ValueError) as raised:
+        load_typed(StationConfig, what="station config", path=path)
+    message = str(raised.value)
+    assert message.startswith(f"station config ({path}): ") and expected in message and "\n" not in message
+
+
+def test_the_commands_name_the_field_in_one_line(tmp_path, capsys):
+    (tmp_path / "learn.yaml").write_text("learn: {episodes: five}\n")
+    assert main(["learn", "--skill", "open", "--config", str(tmp_path / "learn.yaml"), "--print-config"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"drake-skill: error: --config ({tmp_path / 'learn.yaml'}): field 'learn.episodes' = 'five': " \
+                  "expected an integer\n"
+    (tmp_path / "push.yaml").write_text("name: push\nscenario: drawer\nsucess: {}\n")
+    assert main(["skills", str(tmp_path / "push.yaml")]) == 2
+    assert "unknown key 'sucess'; valid keys: name, description, scenario" in capsys.readouterr().err
+
+
+def test_a_file_that_loads_is_not_diagnosed(tmp_path):
+    """Tagged values (!Rpy) and Drake structs pass the walk untouched when the file is right."""
+    (tmp_path / "ok.yaml").write_text("learn: {episodes: 3}\n")
+    from drake_skill.cli.learn_config import LearnFile
+
+    assert load_typed(LearnFile, what="--config", path=tmp_path / "ok.yaml").learn.episodes == 3
+    with pytest.raises(ValueError, match="field 'episodes' = 2.5: expected an integer"):
+        load_typed(LearnConfig, what="learn config", data="episodes: 2.5\n")
