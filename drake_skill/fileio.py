@@ -46,6 +46,18 @@ def atomic_write_json(path: str | os.PathLike, obj: Any) -> Path:
     return atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=True) + "\n")
 
 
+def load_json(path: str | os.PathLike, fix: str) -> Any:
+    """The JSON in ``path``; a damaged file (cut short, not UTF-8) is a one-line ValueError that
+    names it, where the parse stopped and ``fix`` (what the user can do)."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path}: damaged JSON ({e.msg} at line {e.lineno}, column {e.colno}); {fix}") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"{path}: damaged JSON (not UTF-8 text); {fix}") from None
+
+
 def atomic_save_npz(path: str | os.PathLike, arrays: Mapping[str, np.ndarray]) -> Path:
     """Saves arrays to an ``.npz`` atomically. Object arrays are refused."""
     import io

@@ -48,3 +48,29 @@ def test_a_file_that_loads_is_not_diagnosed(tmp_path):
     assert load_typed(LearnFile, what="--config", path=tmp_path / "ok.yaml").learn.episodes == 3
     with pytest.raises(ValueError, match="field 'episodes' = 2.5: expected an integer"):
         load_typed(LearnConfig, what="learn config", data="episodes: 2.5\n")
+
+
+def test_a_damaged_run_or_grid_file_names_itself_and_the_fix(tmp_path):
+    """A JSON or table file cut short (issue 47): one line with the file, where, and what to do."""
+    from drake_skill.experiments.table import COLUMNS, read_table, stored_runs
+    from drake_skill.learning.loop import RunState
+
+    (tmp_path / "checkpoint").mkdir()
+    (tmp_path / "checkpoint" / "state.json").write_text('{"format": 2, "episode": 3, "records": [')
+    with pytest.raises(ValueError) as raised:
+        RunState.load(tmp_path / "checkpoint")
+    assert str(raised.value).startswith(f"{tmp_path / 'checkpoint' / 'state.json'}: damaged JSON (")
+    assert "start over with --force, or delete the run folder" in str(raised.value)
+
+    run = tmp_path / "grid" / "open" / "pi2" / "dense" / "run_000"
+    run.mkdir(parents=True)
+    (run / "summary.json").write_bytes(b'{"skill": "op\xff')
+    with pytest.raises(ValueError, match=r"summary.json: damaged JSON \(not UTF-8 text\); delete that run's folder"):
+        stored_runs(tmp_path / "grid")
+
+    table = tmp_path / "table.csv"
+    table.write_text(",".join(COLUMNS) + "\n" + "open,pi2,dense,0,1")
+    with pytest.raises(ValueError) as raised:
+        read_table(table)
+    assert str(raised.value).startswith(f"{table}: line 2: column '") and "writes the table again" in \
+        str(raised.value)

@@ -38,7 +38,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from drake_skill.fileio import atomic_write_json
+from drake_skill.fileio import atomic_write_json, load_json
 from drake_skill.inputs import station_config
 from drake_skill.learning.evaluation import HELD_OUT_SEED0
 from drake_skill.learning.loop import REWARDS, LearnConfig
@@ -250,7 +250,7 @@ def _execute_run(task: GridTask) -> dict:
 
     final = Path(task.path)
     if (final / "summary.json").is_file():
-        return json.loads((final / "summary.json").read_text())
+        return load_json(final / "summary.json", f"delete the run folder {final}; the grid redoes the run")
     partial = partial_dir(final)
     resume = (partial / "checkpoint" / "state.json").is_file()
     partial.mkdir(parents=True, exist_ok=True)
@@ -332,7 +332,8 @@ def check_settings(out: Path, config: GridConfig, specs: dict) -> None:
     now = {"format": _GRID_FORMAT, **config.settings(),
            "skills": {s: {"station": spec.station_yaml, "rollout": spec.rollout} for s, spec in specs.items()}}
     if path.is_file():
-        saved = json.loads(path.read_text())
+        saved = load_json(path, "restore it from a copy, or give another --out (the stored runs' settings "
+                                "are unknown without it)")
         for key, value in config.settings().items():
             if saved.get(key) != value:
                 flag = "--" + key.replace("_", "-")

@@ -21,10 +21,9 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 from pathlib import Path
 
-from drake_skill.fileio import atomic_write_text
+from drake_skill.fileio import atomic_write_text, load_json
 from drake_skill.learning.loop import REWARDS
 from drake_skill.learning.policy_search import METHODS
 
@@ -49,13 +48,15 @@ def cell_key(skill: str, method: str, reward: str) -> tuple:
 def stored_runs(out) -> list[dict]:
     """The ``summary.json`` of every finished run under ``out`` (``SKILL/METHOD/REWARD/run_RRR``),
     in table order. A partial run (``.run_RRR.partial``) is not one."""
-    summaries = [json.loads(p.read_text()) for p in Path(out).glob("*/*/*/run_*/summary.json")]
+    summaries = [load_json(p, f"delete that run's folder ({p.parent}); 'drake-skill experiment run' redoes it")
+                 for p in Path(out).glob("*/*/*/run_*/summary.json")]
     return sorted(summaries, key=lambda s: (*cell_key(s["skill"], s["method"], s["reward"]), int(s["run"])))
 
 
 def _before(out, skill: str) -> float | None:
     path = Path(out) / skill / "held_out_before.json"
-    return json.loads(path.read_text())["success_rate"] if path.is_file() else None
+    fix = "delete it; 'drake-skill experiment run' measures it again"
+    return load_json(path, fix)["success_rate"] if path.is_file() else None
 
 
 def run_rows(summary: dict, held_out_before: float | None) -> list[dict]:
@@ -112,9 +113,14 @@ def read_table(path) -> list[dict]:
                              f"expected {', '.join(COLUMNS)})")
         rows = list(reader)
     ints, floats = ("run", "episode", "rollouts_used", "success"), ("return", "held_out_after", "held_out_before")
-    for row in rows:
-        for key in ints:
-            row[key] = int(row[key])
-        for key in floats:
-            row[key] = float(row[key]) if row[key] != "" else None
+    for line, row in enumerate(rows, start=2):
+        try:
+            for key in ints:
+                row[key] = int(row[key])
+            for key in floats:
+                row[key] = float(row[key]) if row[key] != "" else None
+        except (TypeError, ValueError):   # a cell missing (None) or not a number: a cut or edited file
+            raise ValueError(f"{path}: line {line}: column '{key}' = {row.get(key)!r} is not a number (the file "
+                             "is cut short or edited); 'drake-skill experiment run' with the grid's --out "
+                             "writes the table again from the stored runs") from None
     return rows

@@ -59,7 +59,6 @@ replays import it when used.
 from __future__ import annotations
 
 import dataclasses as dc
-import json
 import sys
 import time
 from collections import Counter
@@ -69,12 +68,15 @@ from typing import Any, Callable
 import numpy as np
 
 from drake_skill.common import frame_meshcat_camera
-from drake_skill.fileio import atomic_save_npz, atomic_write_json, atomic_write_text, load_npz
+from drake_skill.fileio import atomic_save_npz, atomic_write_json, atomic_write_text, load_json, load_npz
 from drake_skill.learning.config import REWARDS, LearnConfig
 from drake_skill.learning.evaluation import HELD_OUT_SEED0, evaluate_greedy
 from drake_skill.learning.plots import plot_learning_curve
 from drake_skill.learning.policy_search import PER_STEP_METHODS, make_policy_search, policy_search_from_state
 from drake_skill.learning.runlog import RunLog, software_versions
+
+#: What to do with a run whose checkpoint or config.json is damaged (a copy cut short).
+_DAMAGED_RUN = "the run cannot be resumed from it: start over with --force, or delete the run folder"
 
 __all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "REWARDS", "LearnConfig", "LearnOutcome", "LearningRun", "RunState",
            "episode_rewards", "learn", "pose_seed"]
@@ -236,7 +238,7 @@ class RunState:
     @classmethod
     def load(cls, checkpoint: Path) -> "RunState":
         """The state :meth:`save` wrote (format 1: one pending greedy execution, of the current mean)."""
-        state = json.loads((checkpoint / "state.json").read_text())
+        state = load_json(checkpoint / "state.json", _DAMAGED_RUN)
         search = policy_search_from_state(load_npz(checkpoint / "search.npz"))
         pending = state.get("pending")
         if state.get("format", 1) == 1:
@@ -330,7 +332,7 @@ class LearningRun:
         if not (self.checkpoint_dir / "state.json").is_file():
             raise FileNotFoundError(f"{self.checkpoint_dir}: no checkpoint to resume (state.json missing); "
                                     "run without --resume to start")
-        saved = json.loads((self.out_dir / "config.json").read_text())
+        saved = load_json(self.out_dir / "config.json", _DAMAGED_RUN)
         started_with = saved.pop("versions", None)
         if saved != self.run_config:
             changed = sorted(k for k in set(saved) | set(self.run_config) if saved.get(k) != self.run_config.get(k))
