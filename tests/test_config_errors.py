@@ -74,3 +74,25 @@ def test_a_damaged_run_or_grid_file_names_itself_and_the_fix(tmp_path):
         read_table(table)
     assert str(raised.value).startswith(f"{table}: line 2: column '") and "writes the table again" in \
         str(raised.value)
+
+
+@pytest.mark.parametrize("child, expected", [
+    ("table::table_topp", "no frame 'table_topp' in model 'table' (its frames: __model__, table_top)"),
+    ("tablee::table_top", "There is no model instance named 'tablee'"),
+])
+def test_a_directive_naming_no_frame_or_model_is_named_by_its_index(child, expected):
+    """A scenario's weld to a frame or model that does not exist: Drake's RuntimeError (a traceback,
+    once) becomes one line naming the directive (issue 47)."""
+    from drake_skill.skills import scenario_for_skill
+    from drake_skill.station.sim.builder import build_station
+
+    config = scenario_for_skill("open")
+    config.enable_camera = False
+    (i, weld), = [(i, d.add_weld) for i, d in enumerate(config.directives)
+                  if d.add_weld is not None and d.add_weld.child == "table::table_top"]
+    weld.child = child
+    with pytest.raises(ValueError) as raised:
+        build_station(config)
+    message = str(raised.value)
+    assert message.startswith(f"scenario directives[{i}] (add_weld {{parent: world, child: {child}}}): ")
+    assert expected in message and message.endswith("; fix that directive") and "\n" not in message

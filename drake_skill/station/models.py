@@ -20,7 +20,7 @@ from pathlib import Path
 from drake_skill.resources import model_path, models_dir
 
 __all__ = ["PACKAGE_NAME", "PANDA_ILLUSTRATION", "add_package_paths", "add_panda_illustration", "model_path",
-           "model_url", "models_dir", "panda_illustration_table"]
+           "model_url", "models_dir", "panda_illustration_table", "process_directives"]
 
 PACKAGE_NAME = "drake_skill_models"
 """The Drake (package.xml) package name of the models folder."""
@@ -34,6 +34,73 @@ def add_package_paths(package_map) -> None:
     """Registers ``drake_skill_models`` in a Drake PackageMap (idempotent)."""
     if not package_map.Contains(PACKAGE_NAME):
         package_map.Add(PACKAGE_NAME, str(models_dir()))
+
+
+def _directive_text(directive) -> str:
+    """``add_weld {parent: A, child: B}``: the directive as a user wrote it, short."""
+    for kind in ("add_model", "add_weld", "add_frame", "add_model_instance", "add_directives",
+                 "add_collision_filter_group"):
+        body = getattr(directive, kind, None)
+        if body is not None:
+            fields = [f"{name}: {getattr(body, name)}" for name in ("name", "parent", "child", "file")
+                      if isinstance(getattr(body, name, None), str)]
+            return f"{kind} {{{', '.join(fields)}}}"
+    return "a directive"
+
+
+def _short_reason(message: str, directive) -> str:
+    """Drake's reason in one line; for a frame no model has, only the valid frames of the model named."""
+    import re
+
+    message = " ".join(message.split())
+    missing = re.search(r"There is no Frame named '([^']*)'", message)
+    if missing is None:
+        return message[:300]
+    scoped = [getattr(getattr(directive, "add_weld", None), name, "") or "" for name in ("parent", "child")] \
+        if directive is not None else []
+    model = next((n.split("::")[0] for n in scoped if n.endswith("::" + missing[1])), None)
+    frames = re.search(rf"valid names in model instance '{re.escape(model)}' are: ([^;)]*)", message) if model else None
+    return (f"no frame '{missing[1]}' in model '{model}'" + (f" (its frames: {frames[1]})" if frames else "")
+            if model else message[:300])
+
+
+def _culprit(directives, message: str):
+    """(index, directive) that Drake's ``message`` is about: the weld or frame naming the frame it
+    could not find, or the model whose file it names; (None, None) when it does not say."""
+    import re
+
+    missing = re.search(r"There is no Frame named '([^']*)'", message)
+    no_model = re.search(r"There is no model instance named '([^']*)'", message)
+    for i, directive in enumerate(directives):
+        for kind in ("add_weld", "add_frame"):
+            body = getattr(directive, kind, None)
+            names = [getattr(body, n, None) for n in ("parent", "child", "name")] if body is not None else []
+            names += [getattr(getattr(body, "X_PF", None), "base_frame", None)] if kind == "add_frame" else []
+            names = [n for n in names if isinstance(n, str)]
+            if missing and any(n.split("::")[-1] == missing[1] for n in names):
+                return i, directive
+            if no_model and any(n.split("::")[0] == no_model[1] for n in names if "::" in n):
+                return i, directive
+        model = getattr(directive, "add_model", None)
+        if model is not None and model.file and model.file.split("/")[-1] in message:
+            return i, directive
+    return None, None
+
+
+def process_directives(directives, plant, parser) -> None:
+    """Drake's ``ProcessModelDirectives``; a failure (a frame no model has, a model file that does
+    not parse) is a one-line ValueError naming the directive: ``scenario directives[i] (add_weld
+    {...}): <Drake's reason, short>; fix that directive`` instead of Drake's RuntimeError.
+    (Processed as one list: directive by directive, Drake 1.51 aborts on a missing weld frame.)"""
+    from pydrake.multibody.parsing import ModelDirectives, ProcessModelDirectives
+
+    try:
+        ProcessModelDirectives(ModelDirectives(directives=list(directives)), plant, parser)
+    except RuntimeError as e:
+        i, directive = _culprit(directives, " ".join(str(e).split()))
+        where = f"scenario directives[{i}] ({_directive_text(directive)})" if directive is not None \
+            else "scenario directives"
+        raise ValueError(f"{where}: {_short_reason(str(e), directive)}; fix that directive") from None
 
 
 PANDA_ILLUSTRATION = "franka_panda/panda_illustration.yaml"

@@ -57,7 +57,7 @@ from pydrake.geometry import (
     RoleAssign,
 )
 from pydrake.math import RigidTransform
-from pydrake.multibody.parsing import ModelDirectives, Parser, ProcessModelDirectives
+from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, PdControllerGains
 from pydrake.perception import BaseField, DepthImageToPointCloud
@@ -68,7 +68,7 @@ from pydrake.systems.sensors import PixelType, RgbdSensor
 from pydrake.common.value import AbstractValue, Value
 
 from drake_skill.station.controller import X_HAND_TCP, EndEffectorController, add_arm_and_hand, make_finger_limiter
-from drake_skill.station.models import add_package_paths, add_panda_illustration
+from drake_skill.station.models import add_package_paths, add_panda_illustration, process_directives
 from drake_skill.station.config import StationConfig, validate_station_config
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor
@@ -137,7 +137,7 @@ def add_scene_plant(builder: DiagramBuilder, config: StationConfig) -> ScenePlan
     plant, scene_graph = AddMultibodyPlant(config.plant, builder)
     parser = Parser(plant)
     add_package_paths(parser.package_map())
-    ProcessModelDirectives(ModelDirectives(directives=config.directives), plant, parser)
+    process_directives(config.directives, plant, parser)
     arm, hand = plant.GetModelInstanceByName("panda"), plant.GetModelInstanceByName("panda_hand")
     add_panda_illustration(plant, scene_graph, (arm, hand))  # Meshcat only: Franka's meshes
     obj = plant.GetModelInstanceByName(config.object.model)
