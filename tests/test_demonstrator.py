@@ -10,6 +10,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from drake_skill.demos.format import load_demonstration, save_demonstration
 from drake_skill.demos.demonstrator import (
     DemonstratorConfig,
+    DemonstratorError,
     ScriptedDemonstrator,
     demonstration_from,
     humanlike_plan,
@@ -155,7 +156,7 @@ def test_record_many_retries_failed_variations(draw_demonstrator, monkeypatch):
     assert [d.seed for d in demos] == [4, 5]
     assert [d.metadata["rejected_seeds"] for d in demos] == [[3], []]
     monkeypatch.setattr(draw_demonstrator, "config", _fast(seed=6, count=1, max_attempts=1))
-    with pytest.raises(RuntimeError, match="1 variations in a row failed, tripped the reflex or pressed"):
+    with pytest.raises(DemonstratorError, match="1 variations in a row failed, tripped the reflex or pressed"):
         draw_demonstrator.record_many(progress=False)
     # A successful variation that pressed harder than max_force_fraction of the reflex limit is rejected too.
     force = demos[0].metadata["peak_contact_force_N"]
@@ -163,7 +164,7 @@ def test_record_many_retries_failed_variations(draw_demonstrator, monkeypatch):
     assert 0.0 < force <= 0.8 * limit
     monkeypatch.setattr(draw_demonstrator, "config", _fast(seed=7, count=1, max_attempts=1,
                                                            max_force_fraction=0.5 * force / limit))
-    with pytest.raises(RuntimeError, match=f"pressed harder than {0.5 * force:.0f} N"):
+    with pytest.raises(DemonstratorError, match=f"pressed harder than {0.5 * force:.0f} N"):
         draw_demonstrator.record_many(progress=False)
 
 
@@ -173,7 +174,7 @@ def test_a_variation_that_trips_the_reflex_is_rejected_not_raised():
     station = scenario_for_skill("draw")
     station.reflex.contact_force_max = 0.5       # [N]: pulling the handle trips it
     demonstrator = ScriptedDemonstrator("draw", _fast(seed=1, count=1, max_attempts=2), station_config=station)
-    with pytest.raises(RuntimeError, match=r"seeds 1\.\.2; the last reflex at \d+\.\d s \(\d+ N\)"):
+    with pytest.raises(DemonstratorError, match=r"seeds 1\.\.2; the last reflex at \d+\.\d s \(\d+ N\)"):
         demonstrator.record_many(progress=False)
 
 

@@ -74,6 +74,13 @@ def test_export_and_import_errors_are_one_line(tmp_path, demo_dir, capsys):
     assert main(["demos", "import", str(target), str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"drake-skill: error: {target}: not a readable HDF5 file") and "\n" not in err
+    assert err.endswith("export it again with 'drake-skill demos export DIR OUT.hdf5'")
+    with h5py.File(tmp_path / "empty.hdf5", "w") as f:        # an HDF5 file of another kind
+        f.create_group("mask")
+    assert main(["demos", "import", str(tmp_path / "empty.hdf5"), str(tmp_path / "x")]) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        "group 'data' is missing; not a robomimic dataset: import a file written by 'drake-skill demos export "
+        "DIR OUT.hdf5'")
     with h5py.File(tmp_path / "other.hdf5", "w") as f:        # a robomimic file from elsewhere
         f.create_group("data/demo_0/obs")
     assert main(["demos", "import", str(tmp_path / "other.hdf5"), str(tmp_path / "x")]) == 2

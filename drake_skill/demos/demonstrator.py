@@ -160,6 +160,11 @@ class DemonstratorConfig:
         return self.count if self.count > 0 else int(spec.demonstrations)
 
 
+class DemonstratorError(ValueError):
+    """The scripted demonstrator could not show the skill within its attempts: the message says
+    which settings to change (a user error: ``drake-skill`` prints it as one line, exit 2)."""
+
+
 def load_demonstrator_config(path=None, *, data: str | None = None) -> DemonstratorConfig:
     """A DemonstratorConfig from a YAML file or string (missing keys keep their defaults)."""
     return load_typed(DemonstratorConfig, what="demonstrator config", path=path, data=data).validate()
@@ -316,7 +321,7 @@ class ScriptedDemonstrator:
 
         A seed whose variation fails, trips the collision reflex, or presses
         harder than ``max_force_fraction`` of the reflex limit, is skipped (the next seed is tried; at
-        most ``max_attempts`` per demonstration, else RuntimeError). Each
+        most ``max_attempts`` per demonstration, else :class:`DemonstratorError`). Each
         demonstration's ``metadata["rejected_seeds"]`` lists the seeds skipped
         just before it.
         """
@@ -347,7 +352,7 @@ class ScriptedDemonstrator:
                     rejected.append(seed - 1)
                     bar.set_postfix_str(f"seed {seed - 1} {why}; retrying")
                 else:
-                    raise RuntimeError(
+                    raise DemonstratorError(
                         f"{self.skill}: {self.config.max_attempts} variations in a row failed, tripped the reflex "
                         f"or pressed harder than {force_limit:.0f} N (seeds {rejected[0]}..{rejected[-1]}; the last "
                         f"{why}); reduce the variation (time_scale_range, path_noise, grasp_offset, overshoot) "

@@ -156,14 +156,17 @@ def read_robomimic(path) -> list[Demonstration]:
     try:
         f = h5py.File(path, "r")
     except OSError as e:
-        raise ValueError(f"{path}: not a readable HDF5 file ({e})") from e
+        raise ValueError(f"{path}: not a readable HDF5 file ({' '.join(str(e).split())}): a file cut short or "
+                         "of another format; export it again with 'drake-skill demos export DIR OUT.hdf5'") from None
     demos = []
     with f:
         if "data" not in f:
-            raise DemonstrationError(f"{path}: group 'data' is missing; not a robomimic dataset")
+            raise DemonstrationError(f"{path}: group 'data' is missing; not a robomimic dataset: import a file "
+                                     "written by 'drake-skill demos export DIR OUT.hdf5'")
         names = [n for n in f["data"] if n.startswith("demo_") and n[5:].isdigit()]
         if not names:
-            raise DemonstrationError(f"{path}: 'data' has no demo_N groups; nothing to import")
+            raise DemonstrationError(f"{path}: 'data' has no demo_N groups; nothing to import: export a folder "
+                                     "that holds demonstrations ('drake-skill demos list DIR' shows them)")
         for name in sorted(names, key=lambda n: int(n[5:])):
             g = f["data"][name]
             where = f"{path}:/data/{name}"
