@@ -48,10 +48,12 @@ def load_typed(schema, *, what: str, path: str | Path | None = None, data: str |
     try:
         return yaml_load_typed(schema=schema, filename=None if path is None else str(path), data=data,
                                defaults=defaults if defaults is not None else schema())
-    except (RuntimeError, ValueError, TypeError, yaml.YAMLError) as e:
-        text = path.read_text() if path is not None else data
+    except (RuntimeError, ValueError, TypeError, AssertionError, KeyError, AttributeError, IndexError,
+            UnicodeDecodeError, yaml.YAMLError) as e:   # Drake's YAML reader asserts on some shapes (a bare '-')
+        text = path.read_text(errors="replace") if path is not None else data
         found = _diagnose(schema, text)
-        raise ValueError(f"{what} ({where}): {found or ' '.join(str(e).split())}") from None
+        reason = " ".join(str(e).split()) or f"{type(e).__name__}: the YAML does not have the schema's shape"
+        raise ValueError(f"{what} ({where}): {found or reason}") from None
 
 
 # ------------------------------------------------------------------ diagnosis

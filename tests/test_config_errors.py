@@ -67,6 +67,9 @@ def test_a_damaged_run_or_grid_file_names_itself_and_the_fix(tmp_path):
     (run / "summary.json").write_bytes(b'{"skill": "op\xff')
     with pytest.raises(ValueError, match=r"summary.json: damaged JSON \(not UTF-8 text\); delete that run's folder"):
         stored_runs(tmp_path / "grid")
+    (run / "summary.json").write_text('{"skil": "open", "method": "pi2", "reward": "dense", "run": 0}')
+    with pytest.raises(ValueError, match=r"summary.json: not a run summary \(needs skill, method, reward, run\)"):
+        stored_runs(tmp_path / "grid")
 
     table = tmp_path / "table.csv"
     table.write_text(",".join(COLUMNS) + "\n" + "open,pi2,dense,0,1")

@@ -158,42 +158,53 @@ def read_robomimic(path) -> list[Demonstration]:
     except OSError as e:
         raise ValueError(f"{path}: not a readable HDF5 file ({' '.join(str(e).split())}): a file cut short or "
                          "of another format; export it again with 'drake-skill demos export DIR OUT.hdf5'") from None
+    try:
+        with f:
+            return _read_demos(f, path)
+    except DemonstrationError:
+        raise
+    except (OSError, RuntimeError, KeyError, TypeError, ValueError, IndexError) as e:   # h5py on damaged bytes
+        raise ValueError(f"{path}: damaged HDF5 ({type(e).__name__}: {' '.join(str(e).split())[:200]}); export "
+                         "it again with 'drake-skill demos export DIR OUT.hdf5'") from None
+
+
+def _read_demos(f, path: Path) -> list[Demonstration]:
+    """The demonstrations of the open robomimic file ``f`` (``path`` names it in errors)."""
     demos = []
-    with f:
-        if "data" not in f:
-            raise DemonstrationError(f"{path}: group 'data' is missing; not a robomimic dataset: import a file "
-                                     "written by 'drake-skill demos export DIR OUT.hdf5'")
-        names = [n for n in f["data"] if n.startswith("demo_") and n[5:].isdigit()]
-        if not names:
-            raise DemonstrationError(f"{path}: 'data' has no demo_N groups; nothing to import: export a folder "
-                                     "that holds demonstrations ('drake-skill demos list DIR' shows them)")
-        for name in sorted(names, key=lambda n: int(n[5:])):
-            g = f["data"][name]
-            where = f"{path}:/data/{name}"
-            if "drake_skill" not in g:
-                raise DemonstrationError(f"{where}: group 'drake_skill' is missing; only datasets written by "
-                                         "'drake-skill demos export' can be imported (they carry the 100 Hz data)")
-            raw = g["drake_skill"]
-            obs = g["obs"] if "obs" in g else {}
-            try:
-                attrs = {k: raw.attrs[k] for k in ("skill", "seed", "success", "final_object_state", "metadata")}
-            except KeyError as e:
-                raise DemonstrationError(f"{where}/drake_skill: attribute {e} is missing") from e
-            try:
-                metadata = json.loads(attrs["metadata"])
-            except (TypeError, json.JSONDecodeError) as e:
-                raise DemonstrationError(f"{where}/drake_skill: attribute 'metadata' is not JSON ({e})") from e
-            perception = {}
-            if "object_points" in obs:
-                perception = dict(object_points=_get(where, g["obs"], "object_points"),
-                                  perception_valid=_get(where, g["obs"], "object_points_valid"),
-                                  X_WO_start=_get(where, raw, "X_WO_start"))
-            demo = Demonstration(
-                skill=str(attrs["skill"]), seed=int(attrs["seed"]), success=bool(attrs["success"]),
-                final_object_state=float(attrs["final_object_state"]),
-                X_OE=_get(where, g["obs"] if "obs" in g else g, "hand_pose"),
-                **{n: _get(where, raw, n) for n in _RAW}, **perception, metadata=metadata, path=where)
-            demos.append(demo.validate(where))
+    if "data" not in f:
+        raise DemonstrationError(f"{path}: group 'data' is missing; not a robomimic dataset: import a file "
+                                 "written by 'drake-skill demos export DIR OUT.hdf5'")
+    names = [n for n in f["data"] if n.startswith("demo_") and n[5:].isdigit()]
+    if not names:
+        raise DemonstrationError(f"{path}: 'data' has no demo_N groups; nothing to import: export a folder "
+                                 "that holds demonstrations ('drake-skill demos list DIR' shows them)")
+    for name in sorted(names, key=lambda n: int(n[5:])):
+        g = f["data"][name]
+        where = f"{path}:/data/{name}"
+        if "drake_skill" not in g:
+            raise DemonstrationError(f"{where}: group 'drake_skill' is missing; only datasets written by "
+                                     "'drake-skill demos export' can be imported (they carry the 100 Hz data)")
+        raw = g["drake_skill"]
+        obs = g["obs"] if "obs" in g else {}
+        try:
+            attrs = {k: raw.attrs[k] for k in ("skill", "seed", "success", "final_object_state", "metadata")}
+        except KeyError as e:
+            raise DemonstrationError(f"{where}/drake_skill: attribute {e} is missing") from e
+        try:
+            metadata = json.loads(attrs["metadata"])
+        except (TypeError, json.JSONDecodeError) as e:
+            raise DemonstrationError(f"{where}/drake_skill: attribute 'metadata' is not JSON ({e})") from e
+        perception = {}
+        if "object_points" in obs:
+            perception = dict(object_points=_get(where, g["obs"], "object_points"),
+                              perception_valid=_get(where, g["obs"], "object_points_valid"),
+                              X_WO_start=_get(where, raw, "X_WO_start"))
+        demo = Demonstration(
+            skill=str(attrs["skill"]), seed=int(attrs["seed"]), success=bool(attrs["success"]),
+            final_object_state=float(attrs["final_object_state"]),
+            X_OE=_get(where, g["obs"] if "obs" in g else g, "hand_pose"),
+            **{n: _get(where, raw, n) for n in _RAW}, **perception, metadata=metadata, path=where)
+        demos.append(demo.validate(where))
     return demos
 
 

@@ -48,8 +48,14 @@ def cell_key(skill: str, method: str, reward: str) -> tuple:
 def stored_runs(out) -> list[dict]:
     """The ``summary.json`` of every finished run under ``out`` (``SKILL/METHOD/REWARD/run_RRR``),
     in table order. A partial run (``.run_RRR.partial``) is not one."""
-    summaries = [load_json(p, f"delete that run's folder ({p.parent}); 'drake-skill experiment run' redoes it")
-                 for p in Path(out).glob("*/*/*/run_*/summary.json")]
+    summaries = []
+    for p in Path(out).glob("*/*/*/run_*/summary.json"):
+        fix = f"delete that run's folder ({p.parent}); 'drake-skill experiment run' redoes it"
+        summary = load_json(p, fix)
+        kinds = {"skill": str, "method": str, "reward": str, "run": int}
+        if not isinstance(summary, dict) or any(not isinstance(summary.get(k), t) for k, t in kinds.items()):
+            raise ValueError(f"{p}: not a run summary (needs {', '.join(kinds)}); {fix}")
+        summaries.append(summary)
     return sorted(summaries, key=lambda s: (*cell_key(s["skill"], s["method"], s["reward"]), int(s["run"])))
 
 
@@ -106,12 +112,16 @@ def read_table(path) -> list[dict]:
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such table; run 'drake-skill experiment run' first")
-    with open(path, newline="") as f:
-        reader = csv.DictReader(f)
-        if tuple(reader.fieldnames or ()) != COLUMNS:
-            raise ValueError(f"{path}: not an experiment table (columns {reader.fieldnames}; "
-                             f"expected {', '.join(COLUMNS)})")
-        rows = list(reader)
+    rebuild = "'drake-skill experiment run' with the grid's --out writes the table again from the stored runs"
+    try:
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            if tuple(reader.fieldnames or ()) != COLUMNS:
+                raise ValueError(f"{path}: not an experiment table (columns {reader.fieldnames}; "
+                                 f"expected {', '.join(COLUMNS)})")
+            rows = list(reader)
+    except (UnicodeDecodeError, csv.Error) as e:
+        raise ValueError(f"{path}: damaged table ({e}); {rebuild}") from None
     ints, floats = ("run", "episode", "rollouts_used", "success"), ("return", "held_out_after", "held_out_before")
     for line, row in enumerate(rows, start=2):
         try:
@@ -121,6 +131,5 @@ def read_table(path) -> list[dict]:
                 row[key] = float(row[key]) if row[key] != "" else None
         except (TypeError, ValueError):   # a cell missing (None) or not a number: a cut or edited file
             raise ValueError(f"{path}: line {line}: column '{key}' = {row.get(key)!r} is not a number (the file "
-                             "is cut short or edited); 'drake-skill experiment run' with the grid's --out "
-                             "writes the table again from the stored runs") from None
+                             f"is cut short or edited); {rebuild}") from None
     return rows

@@ -239,11 +239,22 @@ class RunState:
     def load(cls, checkpoint: Path) -> "RunState":
         """The state :meth:`save` wrote (format 1: one pending greedy execution, of the current mean)."""
         state = load_json(checkpoint / "state.json", _DAMAGED_RUN)
-        search = policy_search_from_state(load_npz(checkpoint / "search.npz"))
-        pending = state.get("pending")
-        if state.get("format", 1) == 1:
-            pending = [] if pending is None else [{**pending, "mean": search.mean.tolist()}]
-        return cls(search, state["records"], state["curve"], pending, state.get("held_out_before"))
+        try:
+            search = policy_search_from_state(load_npz(checkpoint / "search.npz"))
+        except (KeyError, TypeError, IndexError, AttributeError) as e:   # arrays of another shape or kind
+            raise ValueError(f"{checkpoint / 'search.npz'}: damaged checkpoint ({type(e).__name__}: {e}); "
+                             f"{_DAMAGED_RUN}") from None
+        try:
+            pending = state.get("pending")
+            if state.get("format", 1) == 1:
+                pending = [] if pending is None else [{**pending, "mean": search.mean.tolist()}]
+            records, curve = state["records"], state["curve"]
+            if not (isinstance(records, list) and isinstance(curve, list) and isinstance(pending, list)):
+                raise TypeError("records, curve and pending must be lists")
+        except (KeyError, TypeError, AttributeError) as e:
+            raise ValueError(f"{checkpoint / 'state.json'}: damaged checkpoint ({type(e).__name__}: {e}); "
+                             f"{_DAMAGED_RUN}") from None
+        return cls(search, records, curve, pending, state.get("held_out_before"))
 
 
 class LearningRun:
