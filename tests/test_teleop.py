@@ -198,6 +198,7 @@ def test_an_interrupted_teleoperation_keeps_its_finished_demonstration(tmp_path,
             click(meshcat, STOP_BUTTON)
 
     config = TeleopConfig(realtime_rate=0.0, record_perception=False)
+    handler = signal.getsignal(signal.SIGTERM)        # pytest-xdist's worker has one of its own
     with pytest.raises(RecordingInterrupted, match="kept the 1 finished demonstration.*replace the old set"):
         record_interactive_into(old, "open", 2, force=True, meshcat=meshcat, config=config, user=user,
                                 station_config=station, status=lambda line: demos_done.append(line)
@@ -205,7 +206,7 @@ def test_an_interrupted_teleoperation_keeps_its_finished_demonstration(tmp_path,
     (kept,) = load_demonstrations(old)
     assert kept.metadata["source"] == "interactive" and kept.duration == pytest.approx(1.1)
     assert not old.with_name(".open.recording").exists()
-    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL      # the handler is restored
+    assert signal.getsignal(signal.SIGTERM) is handler      # the handler is restored
     assert main(["demos", "list", str(old)]) == 0
     assert "demo_000.npz" in capsys.readouterr().out
 
