@@ -186,3 +186,34 @@ def test_the_loggers_record_what_sampling_the_ports_after_each_advance_gives(dra
     assert np.array_equal(records.state[:, :7], np.array(recorder.q))
     assert np.array_equal(records.contact_force, recorder.force)
     assert np.max(records.contact_force) > 1.0      # the finger pulls the handle: forces are recorded
+
+
+def test_a_reflex_rollout_names_the_bodies_in_contact():
+    """Issue 51: a rollout stopped by the reflex keeps what touched what, where and when, in its
+    record (results.jsonl) and in an evaluation's report (evaluation.json)."""
+    from drake_skill.learning.evaluation import results_report
+
+    config = scenario_for_skill("open")
+    config.enable_camera = False
+    # Straight down from above the closed lid into it (object frame, 2 s).
+    t = np.linspace(0.0, 2.0, 21)
+    s = t / 2.0
+    s = 10 * s**3 - 15 * s**4 + 6 * s**5
+    start, goal = np.array([-0.15, 0.0, 0.45, 0, 1, 0, 0]), np.array([0.0, 0.0, 0.05, 0, 1, 0, 0])
+    dmp_config = DmpConfig(n_basis=10)
+    dmp = fit_dmp(t, start + (goal - start) * s[:, None], dmp_config)
+    runner = RolloutRunner(ActionModel("open", dmp, dmp_config), config,
+                           RolloutConfig(object_pose="ground_truth", goal_model=False, settle_time=0.5))
+    result = runner.run(dmp.weights, seed=0)
+    assert result.failed and result.reason == "reflex"
+    contact = result.summary()["contact"]
+    assert {tuple(pair[:2]) for pair in contact["pairs"]} == {("panda_hand::panda_leftfinger", "box::box_lid"),
+                                                              ("panda_hand::panda_rightfinger", "box::box_lid")}
+    assert all(pair[2] > 0 for pair in contact["pairs"]) and contact["cause"] == "force"
+    assert f"t = {contact['t']:.3f} s" in result.message
+    lid_top = 0.15                                   # the closed lid's top face, above the table [m]
+    assert abs(contact["point"][2] - lid_top) < 0.01
+    assert results_report([0], [result])["contacts"] == [contact]
+    # Another failure carries none (a runaway sample: stopped before any simulation).
+    runaway = runner.run(dmp.weights * 1e6, seed=0)
+    assert runaway.reason == "workspace" and runaway.contact is None and "contact" not in runaway.summary()

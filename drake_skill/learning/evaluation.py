@@ -50,7 +50,8 @@ def results_report(seeds, results) -> dict[str, Any]:
     ``success_rate`` and ``successes``, ``verdicts``, ``returns`` (0 for a
     failed rollout), ``final_object_state`` (None where failed), ``failures``
     (reason -> count), per rollout its failure ``reasons`` ("" where it did
-    not fail) and ``object_poses`` (the object's true placement on the table,
+    not fail), ``contacts`` (a reflex trip's bodies in contact, ``RolloutResult.contact``;
+    None where none tripped) and ``object_poses`` (the object's true placement on the table,
     [x m, y m, yaw rad] in the world frame; None where unknown), and
     ``ik_warnings``."""
     return {
@@ -63,6 +64,7 @@ def results_report(seeds, results) -> dict[str, Any]:
                                for r in results],
         "failures": dict(Counter(r.reason for r in results if r.failed)),
         "reasons": [str(r.reason) if r.failed else "" for r in results],
+        "contacts": [getattr(r, "contact", None) for r in results],
         "object_poses": [_placement(r) for r in results],
         "ik_warnings": int(sum(r.ik_warnings for r in results)),
     }

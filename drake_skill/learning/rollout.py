@@ -192,6 +192,9 @@ class RolloutResult:
       ground truth (xyz + wxyz).
     wall_s: wall-clock time of the rollout [s]; ik_warnings: count of
     differential IK's "no solution"/"stuck" warnings during it.
+    contact: a reflex trip's ``{"pairs": [[robot body, other body, force_N], ...],
+    "point": [x, y, z], "t": s, "cause": "force" | "torque joint i"}`` (the contacts at
+    the stop; pairs and point None on the robot); None otherwise.
     """
 
     seed: int
@@ -211,6 +214,7 @@ class RolloutResult:
     object_pose_true: np.ndarray = dc.field(default_factory=lambda: np.full(7, np.nan))
     wall_s: float = 0.0
     ik_warnings: int = 0
+    contact: dict | None = None
 
     @property
     def X_WO(self) -> RigidTransform:
@@ -231,7 +235,8 @@ class RolloutResult:
                 "final_object_state": None if not math.isfinite(final) else float(final),
                 "n_frames": int(len(self.rewards)), "wall_s": round(float(self.wall_s), 3),
                 "ik_warnings": int(self.ik_warnings),
-                "object_pose": [float(v) for v in self.object_pose]}
+                "object_pose": [float(v) for v in self.object_pose]} | (
+                    {"contact": self.contact} if self.contact is not None else {})
 
     def equal_numbers(self, other: "RolloutResult") -> bool:
         """Same numbers in every field but ``wall_s`` (arrays compared exactly, NaN equal to NaN)."""
@@ -433,12 +438,26 @@ class RolloutRunner:
         except Exception as error:   # recorded, the run goes on (docs/method.md section 5)
             result = RolloutResult(seed=seed, failed=True, reason=classify_failure(error),
                                    message=f"{type(error).__name__}: {error}"[:500],
-                                   object_pose=result.object_pose, object_pose_true=result.object_pose_true)
+                                   object_pose=result.object_pose, object_pose_true=result.object_pose_true,
+                                   contact=self._contact(error))
         finally:
             logger.removeFilter(counter)
         result.wall_s = time.perf_counter() - start
         result.ik_warnings = counter.count
         return result
+
+    def _contact(self, error) -> dict | None:
+        """A reflex trip's ``{"pairs", "point", "t", "cause"}`` (the contacts at the stop; pairs and
+        point None on the robot, which reports no contacts); None for other failures."""
+        if classify_failure(error) != "reflex":
+            return None
+        report = getattr(self.station, "contact_report", None)
+        try:
+            contact = report(self.context) if report is not None else {"pairs": None, "point": None}
+        except Exception:   # the report describes a stop; it never turns one into another failure
+            contact = {"pairs": None, "point": None}
+        return {**contact, "t": round(float(getattr(error, "time_s", self.context.get_time())), 4),
+                "cause": str(getattr(error, "cause", ""))}
 
     def _run(self, weights: np.ndarray, result: RolloutResult) -> None:
         """Fills ``result`` as the rollout goes (what it knows before a failure stays)."""

@@ -170,6 +170,31 @@ class RobotSceneContactForce(LeafSystem):
         output.SetAtIndex(0, force)
 
 
+def robot_scene_pairs(plant, results, robot_bodies) -> list[dict]:
+    """The robot-scene point contacts in ``results`` (a ContactResults of ``plant``), strongest first:
+    ``{"a": "model::body" (the robot's), "b": "model::body", "force_N": |f|, "point": [x, y, z] (W, m)}``,
+    the same pairs :class:`RobotSceneContactForce` sums."""
+    from pydrake.multibody.tree import BodyIndex
+
+    robot = frozenset(int(b) for b in robot_bodies)
+
+    def name(index) -> str:
+        body = plant.get_body(BodyIndex(int(index)))
+        return f"{plant.GetModelInstanceName(body.model_instance())}::{body.name()}"
+
+    pairs = []
+    for i in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(i)
+        a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        if (a in robot) == (b in robot):
+            continue
+        if b in robot:
+            a, b = b, a
+        pairs.append({"a": name(a), "b": name(b), "force_N": float(np.linalg.norm(info.contact_force())),
+                      "point": [float(v) for v in info.contact_point()]})
+    return sorted(pairs, key=lambda p: -p["force_N"])
+
+
 def add_reflex_monitor(builder, contact_force_port, external_torque_port, reflex, period: float) -> ReflexMonitor:
     """Adds a :class:`ReflexMonitor` named "reflex" fed by the two ports and exports its
     ``filtered`` output as ``reflex_state`` (the station contract); returns it."""

@@ -71,7 +71,7 @@ from drake_skill.station.controller import X_HAND_TCP, EndEffectorController, ad
 from drake_skill.station.models import add_package_paths, add_panda_illustration, process_directives
 from drake_skill.station.config import StationConfig, validate_station_config
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
-from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor
+from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor, robot_scene_pairs
 
 # The robot's and the table's collision geometries get these ContactConfig
 # surfaces (body name, geometry name fragment, "" for any of the body's
@@ -310,6 +310,19 @@ class Station(Diagram):
         ctx = monitor.GetMyContextFromRoot(context)
         force = float(monitor.GetInputPort("contact_force").Eval(ctx)[0])
         return force, np.asarray(monitor.GetInputPort("external_torque").Eval(ctx), dtype=float)
+
+    def contact_report(self, context) -> dict:
+        """What touches the robot at the state in ``context``: ``{"pairs": [[robot body, other body,
+        force_N], ...] (strongest first, summed over the contact points of a pair), "point": [x, y, z]
+        (W, m) of the strongest contact point or None}``; what a reflex trip's record keeps."""
+        station_context = self.GetMyContextFromRoot(context)
+        results = self.GetOutputPort("contact_results").Eval(station_context)
+        points = robot_scene_pairs(self.plant, results, self.robot_bodies)
+        summed = {}
+        for p in points:
+            summed[(p["a"], p["b"])] = summed.get((p["a"], p["b"]), 0.0) + p["force_N"]
+        pairs = sorted(([a, b, round(f, 3)] for (a, b), f in summed.items()), key=lambda row: -row[2])
+        return {"pairs": pairs, "point": [round(v, 4) for v in points[0]["point"]] if points else None}
 
     # ------------------------------------------------------------------ camera
     def _add_camera(self, builder) -> None:
