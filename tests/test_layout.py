@@ -33,9 +33,11 @@ def math_modules() -> list[str]:
     names = list(MATH_MODULES)
     for box in MATH_BOXES:
         names.append(f"drake_skill.{box}")
-        for path in sorted((PACKAGE / box).glob("*.py")):
+        for path in sorted((PACKAGE / box).rglob("*.py")):
             if path.stem not in ("__init__",) + DRAKE_SIDE:
-                names.append(f"drake_skill.{box}.{path.stem}")
+                names.append(".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts))
+            elif path.stem == "__init__" and path.parent != PACKAGE / box:      # a package inside the box
+                names.append(".".join(path.parent.relative_to(PACKAGE.parent).parts))
     return names
 
 
