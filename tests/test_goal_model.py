@@ -19,13 +19,13 @@ from scipy.stats import multivariate_normal
 from drake_skill.reward.goal_model import (
     GoalHMM,
     GoalModelConfig,
-    _backward_log,
     check_sequences,
     forward_backward,
     forward_log,
     n_free_parameters,
     viterbi,
 )
+from drake_skill.reward.goal_model.inference import _backward_log
 
 LENGTHS = [50, 60, 45]
 
@@ -310,7 +310,7 @@ def test_posteriors_are_exact_for_zero_transitions_and_huge_gaps(k, visits, gap)
     np.testing.assert_allclose(filtered.sum(axis=1), 1.0, atol=1e-12)
     np.testing.assert_allclose(smoothed.sum(axis=1), 1.0, atol=1e-12)
     # The numpy fallback (hmmlearn's compiled recursions absent) gives the same numbers.
-    import drake_skill.reward.goal_model as gm_module
+    import drake_skill.reward.goal_model.inference as gm_module
     saved = gm_module._hmmc
     try:
         gm_module._hmmc = None
@@ -357,7 +357,7 @@ def test_compiled_forward_backward_is_hmmlearns_and_equals_plain_numpy():
     """goal_model keeps hmmlearn's private compiled recursions (filtered posteriors
     need the forward lattice, which the public API does not return): pinned here
     against the plain numpy recursion on a small model."""
-    import drake_skill.reward.goal_model as gm_module
+    import drake_skill.reward.goal_model.inference as gm_module
 
     assert gm_module._hmmc is not None, "hmmlearn's compiled _hmmc.forward_log/backward_log are gone"
     rng = np.random.default_rng(7)
@@ -387,7 +387,7 @@ def test_posteriors_equal_hmmlearns_public_score_samples(fitted4):
 def test_full_covariances_from_the_public_property(ct):
     """_full_covars reads hmmlearn's public covars_ (with the spherical shape fix): the
     same matrices, bit for bit, as built by hand from the private _covars_."""
-    from drake_skill.reward.goal_model import _full_covars
+    from drake_skill.reward.goal_model.initialisation import _full_covars
 
     rng = np.random.default_rng(1)
     X = rng.normal(size=(80, 3)) + np.repeat(np.eye(3)[:2] * 4, 40, axis=0)
@@ -661,7 +661,7 @@ def _brute_force_change_points(s, k):
 
 @pytest.mark.parametrize("seed, k", [(0, 1), (0, 2), (1, 3), (2, 4)])
 def test_change_points_are_the_least_squares_split(seed, k):
-    from drake_skill.reward.goal_model import _change_point_labels
+    from drake_skill.reward.goal_model.initialisation import _change_point_labels
 
     rng = np.random.default_rng(seed)
     s = np.repeat(rng.normal(size=(k, 2)) * 2, rng.integers(2, 5, size=k), axis=0) + rng.normal(0, 0.3, (1, 2))
@@ -672,7 +672,7 @@ def test_change_points_are_the_least_squares_split(seed, k):
 def test_change_points_weigh_the_first_frame_and_exact_zeros():
     """The first frame is part of the first segment (an outlier there gets a segment of its own), and
     goal data with exact zeros splits as any other."""
-    from drake_skill.reward.goal_model import _change_point_labels
+    from drake_skill.reward.goal_model.initialisation import _change_point_labels
 
     s = np.array([[10.0, 1.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [5.0, 0.0], [5.0, 0.0]])
     for k in (2, 3):
@@ -683,7 +683,7 @@ def test_change_points_weigh_the_first_frame_and_exact_zeros():
 def test_segmental_kmeans_is_a_fixed_point_of_the_left_to_right_alignment():
     """Each demonstration's labels are the cheapest path 0 -> ... (stay or step one state on) against
     the means of those labels, found here by enumerating every such path."""
-    from drake_skill.reward.goal_model import _segmental_kmeans
+    from drake_skill.reward.goal_model.initialisation import _segmental_kmeans
 
     rng = np.random.default_rng(4)
     k = 3
@@ -834,7 +834,7 @@ def test_first_initialisation_is_left_to_right(k):
     """Restart 0: change points refined by segmental k-means; start on state 0 (leak 0.02 spread over
     the others), stay probabilities from the mean segment duration, clipped to [0.5, 0.98], the leak
     spread evenly; means of each label; covariances pulled toward the global diagonal by d + 2 frames."""
-    from drake_skill.reward.goal_model import _change_point_labels, _segmental_kmeans
+    from drake_skill.reward.goal_model.initialisation import _change_point_labels, _segmental_kmeans
 
     _, X, lengths = _data(3, 2, [30, 40])
     gm = GoalHMM(n_restarts=1)
@@ -890,7 +890,7 @@ def test_later_restarts_follow_their_documented_recipes(r):
     generator, clusters relabelled in order of their frames' mean relative time."""
     from sklearn.cluster import KMeans
 
-    from drake_skill.reward.goal_model import _segmental_kmeans
+    from drake_skill.reward.goal_model.initialisation import _segmental_kmeans
 
     X, lengths = np.random.default_rng(0).normal(size=(70, 2)), [30, 40]   # no structure: starts matter
     k, ct_index = 3, 1
@@ -946,7 +946,7 @@ def test_first_initialisation_of_long_segments_with_two_states():
 def test_a_state_the_alignment_leaves_empty_starts_on_one_random_frame():
     """Two 3-frame demonstrations whose left-to-right alignment never reaches state 2: that state starts
     on the one frame drawn from restart 0's generator, with no sample covariance."""
-    from drake_skill.reward.goal_model import _change_point_labels, _segmental_kmeans
+    from drake_skill.reward.goal_model.initialisation import _change_point_labels, _segmental_kmeans
 
     rng = np.random.default_rng(502)
     segs = [rng.normal(size=(int(rng.integers(3, 7)), 2)) for _ in range(2)]
@@ -968,7 +968,7 @@ def test_numpy_recursions_where_no_path_explains_a_frame_from_some_state():
     """Emissions of -inf (a frame one state cannot emit): the numpy fallbacks keep -inf where no path
     continues (the backward pass from state 1, which must move to state 2 and cannot emit frame 2)
     and equal the scipy reference and hmmlearn's compiled recursions, without warnings."""
-    import drake_skill.reward.goal_model as gm_module
+    import drake_skill.reward.goal_model.inference as gm_module
 
     pi = np.array([0.5, 0.5, 0.0])
     P = np.array([[0.5, 0.5, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])

@@ -183,7 +183,8 @@ def test_bench_reward_json(capsys):
 
 
 # ------------------------------------------------- issue 12: finite, robust rewards
-from drake_skill.reward.goal_model import _backward_log, forward_log  # noqa: E402
+from drake_skill.reward.goal_model import forward_log  # noqa: E402
+from drake_skill.reward.goal_model.inference import _backward_log  # noqa: E402
 
 
 def _strict_chain_pomrp():

@@ -42,13 +42,13 @@ from scipy.special import logsumexp
 from drake_skill.reward.goal_model import (
     GoalHMM,
     GoalModelConfig,
-    _precision_cholesky,
     check_sequences,
     forward_backward,
     gaussian_log_density,
     regulariser_scale,
     viterbi,
 )
+from drake_skill.reward.goal_model.inference import _precision_cholesky
 from drake_skill.reward.mrp import MrpConfig, monte_carlo_values
 
 __all__ = ["VerdictConfig", "OffModelConfig", "PomrpConfig", "Pomrp", "fit_pomrp"]
