@@ -35,6 +35,8 @@ import argparse
 import json
 from pathlib import Path
 
+from drake_skill.cli import options
+
 NAME = "evaluate"
 HELP = "greedy success of a skill over held-out object poses (table + JSON)"
 
@@ -56,8 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="rollout worker processes (default: one per CPU this process may use, "
                              f"{default_workers()} here)")
     parser.add_argument("--ray-address", default=None, help="run on Ray actors of this cluster")
-    parser.add_argument("--ground-truth-pose", action="store_true",
-                        help="object frame from the simulator's ground truth instead of the segmenter")
+    options.add_ground_truth_pose(parser)
     parser.add_argument("--all-demos", action="store_true",
                         help="evaluate every demonstration's DMP (its weights, goal and duration): "
                              "plain imitation of each demonstration")
@@ -80,7 +81,6 @@ def run(args: argparse.Namespace) -> int:
     from drake_skill.fileio import atomic_write_json
     from drake_skill.learning.evaluation import evaluate_skill, evaluation_table
     from drake_skill.learning.plots import plot_outcomes_by_placement
-    from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.skill import Skill
     from drake_skill.station.config import load_station_config
 
@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     station = Skill.load(args.skill_dir).station_config()
     if args.station_config is not None:
         station = load_station_config(args.station_config, defaults=station)
-    rollout_config = RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived")
+    rollout_config = options.rollout_config(args)
     if args.explore:
         from drake_skill.learning.evaluation import exploration_table, explore_skill
 

@@ -35,6 +35,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from drake_skill.cli import options
+
 NAME = "experiment"
 HELP = "the thesis's simulation study: a resumable grid of learning runs (run) and its results (report)"
 
@@ -86,8 +88,7 @@ def _add_run_arguments(run_p: argparse.ArgumentParser) -> None:
                         help="start from this fitted skill instead of recording and fitting (one skill)")
     budget.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE",
                         help="scenario YAML over each skill's scenario (StationConfig)")
-    budget.add_argument("--ground-truth-pose", action="store_true",
-                        help="object frame from the simulator's ground truth instead of the segmenter")
+    options.add_ground_truth_pose(budget)
     where = run_p.add_argument_group("where")
     where.add_argument("--workers", type=int, default=None,
                        help=f"runs at a time (default: one per CPU this process may use, {default_workers()} here)")
@@ -105,9 +106,8 @@ def _add_run_arguments(run_p: argparse.ArgumentParser) -> None:
 
 
 def _run(args) -> int:
-    from drake_skill.cli import errors
+    from drake_skill.cli import errors, options
     from drake_skill.experiments.grid import GridConfig, run_grid
-    from drake_skill.learning.rollout import RolloutConfig
 
     errors.output_folder(args.out, "--out", what="the experiment grid")
     if args.skill_dir is not None:
@@ -115,7 +115,7 @@ def _run(args) -> int:
     config = GridConfig(skills=tuple(args.skills), methods=tuple(args.methods), rewards=tuple(args.rewards),
                         runs=args.runs, episodes=args.episodes, rollouts=args.rollouts, held_out=args.held_out,
                         seed0=args.seed0, keep_skills=args.keep_skills, fit=args.fit)
-    rollout = RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived")
+    rollout = options.rollout_config(args)
     outcome = run_grid(args.out, config, skill_dir=args.skill_dir, station_yaml=args.station_config,
                        rollout_config=rollout, workers=args.workers, use_ray=args.ray,
                        ray_address=args.ray_address, progress=not args.quiet, quiet=args.quiet)

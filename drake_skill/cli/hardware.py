@@ -58,6 +58,8 @@ import math
 import sys
 from pathlib import Path
 
+from drake_skill.cli import options
+
 NAME = "hardware"
 HELP = "a skill on a real Panda over LCM: run (greedy or learning), record-demo (kinesthetic), refine"
 
@@ -75,8 +77,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                        help="greedy rollouts (default 1); per episode with --episodes")
     run_p.add_argument("--seed0", type=int, default=0, help="object pose seed of the first rollout (default 0)")
     run_p.add_argument("--episodes", type=int, default=0, help="policy-search episodes (default 0: greedy only)")
-    run_p.add_argument("--ground-truth-pose", action="store_true",
-                       help="object frame from the placed pose instead of the camera's segmenter")
+    options.add_ground_truth_pose(run_p, on_robot=True)
     run_p.add_argument("--out", type=Path, default=None, help="output folder (default SKILL/hardware_run)")
     demo_p = actions.add_parser("record-demo", help="record a kinesthetic demonstration",
                                 description="Records the measured hand path and camera while a person guides the arm.")
@@ -123,7 +124,7 @@ def _prompt(enabled: bool):
 def _run(args) -> int:
     from drake_skill.cli.sim_robot import load_config
     from drake_skill.fileio import atomic_write_json
-    from drake_skill.learning.rollout import RolloutConfig, RolloutRunner
+    from drake_skill.learning.rollout import RolloutRunner
     from drake_skill.skill import Skill
     from drake_skill.station.hardware.station import build_hardware_station
 
@@ -137,8 +138,7 @@ def _run(args) -> int:
     skill = Skill.load(args.skill_dir)
     config = load_config(args.config, args.lcm_url, skill.name)
     camera = config.station.enable_camera
-    rollout = RolloutConfig(object_pose="perceived" if camera and not args.ground_truth_pose else "ground_truth",
-                            goal_model=camera)
+    rollout = options.rollout_config(args, camera=camera)
     out = args.out if args.out is not None else args.skill_dir / "hardware_run"
     station = build_hardware_station(config)
     station.set_reset_hook(_prompt(not args.yes))

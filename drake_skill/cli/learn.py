@@ -38,7 +38,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from drake_skill.cli import errors
+from drake_skill.cli import errors, options
 
 NAME = "learn"
 HELP = "improve a skill by policy search on its learned reward (the main job)"
@@ -97,8 +97,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument("--force", action="store_true", help="start over in an --out that holds a run")
     run.add_argument("--meshcat", action="store_true", help="watch the greedy executions live in Meshcat")
     run.add_argument("--no-replay", action="store_true", help="do not write the Meshcat HTML replays")
-    run.add_argument("--ground-truth-pose", action="store_true",
-                     help="object frame from the simulator's ground truth instead of the segmenter")
+    options.add_ground_truth_pose(run)
     run.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE",
                      help="scenario YAML (StationConfig; default: the skill's scenario)")
     run.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -196,7 +195,6 @@ def prepare_skill(args, out: Path) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     from drake_skill.learning.loop import LearnConfig, learn
-    from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.skill import Skill
 
     _apply_config_file(args)
@@ -235,7 +233,7 @@ def run(args: argparse.Namespace) -> int:
     config = LearnConfig(method=args.method, reward=args.reward, weighting=args.weighting or "",
                          episodes=args.episodes, rollouts=args.rollouts, seed=args.seed,
                          held_out=args.held_out, exploration_scale=args.exploration_scale)
-    rollout = RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived")
+    rollout = options.rollout_config(args)
     meshcat = None
     if args.meshcat:
         from pydrake.geometry import Meshcat

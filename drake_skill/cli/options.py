@@ -1,0 +1,25 @@
+"""Options several commands share, defined once: the object frame's source, and the
+:class:`~drake_skill.learning.rollout.RolloutConfig` it selects."""
+
+from __future__ import annotations
+
+import argparse
+
+__all__ = ["add_ground_truth_pose", "rollout_config"]
+
+
+def add_ground_truth_pose(parser, on_robot: bool = False) -> None:
+    """``--ground-truth-pose``: the object frame from the simulator's ground truth (on the robot:
+    the placed pose) instead of the camera's segmenter (docs/method.md section 2)."""
+    where = "the placed pose" if on_robot else "the simulator's ground truth"
+    parser.add_argument("--ground-truth-pose", action="store_true",
+                        help=f"object frame from {where} instead of the camera's segmenter")
+
+
+def rollout_config(args: argparse.Namespace, camera: bool = True):
+    """The RolloutConfig of the parsed flags: the object frame perceived unless
+    ``--ground-truth-pose`` or no camera; the learned reward only with a camera."""
+    from drake_skill.learning.rollout import RolloutConfig
+
+    perceived = camera and not args.ground_truth_pose
+    return RolloutConfig(object_pose="perceived" if perceived else "ground_truth", goal_model=camera)
