@@ -187,7 +187,7 @@ def test_an_interrupted_teleoperation_keeps_its_finished_demonstration(tmp_path,
     (old / "demo_000.npz").write_bytes(b"an old set")
     (old / "demo_001.npz").write_bytes(b"an old set")
     meshcat = Meshcat()
-    demos_done = []
+    demos_done, lines = [], []
 
     def user(t):
         if 0.3 <= t < 0.31:
@@ -201,10 +201,12 @@ def test_an_interrupted_teleoperation_keeps_its_finished_demonstration(tmp_path,
     handler = signal.getsignal(signal.SIGTERM)        # pytest-xdist's worker has one of its own
     with pytest.raises(RecordingInterrupted, match="kept the 1 finished demonstration.*replace the old set"):
         record_interactive_into(old, "open", 2, force=True, meshcat=meshcat, config=config, user=user,
-                                station_config=station, status=lambda line: demos_done.append(line)
-                                if "kept" in line else None)
+                                station_config=station, status=lambda line: (lines.append(line), demos_done.append(line)
+                                                                             if "kept" in line else None))
     (kept,) = load_demonstrations(old)
     assert kept.metadata["source"] == "interactive" and kept.duration == pytest.approx(1.1)
+    # The time limits were announced (issue 51: they were not).
+    assert "Record (R) (within 600 s)" in " ".join(lines) and "stops by itself after 120 s" in " ".join(lines)
     assert not old.with_name(".open.recording").exists()
     assert signal.getsignal(signal.SIGTERM) is handler      # the handler is restored
     assert main(["demos", "list", str(old)]) == 0

@@ -349,7 +349,8 @@ class TeleopSession:
         X_WO = self.reset(seed)
         self.simulator.set_target_realtime_rate(config.realtime_rate)
         status(f"[{self.skill}, seed {seed}] drive the hand to the start, then press "
-               f"{RECORD_BUTTON}; {STOP_BUTTON} ends the demonstration")
+               f"{RECORD_BUTTON} (within {config.max_wait:.0f} s); {STOP_BUTTON} ends the demonstration "
+               f"(it stops by itself after {config.max_duration:.0f} s)")
         # Idle: the same loop (reflex, solver and divergence checks), nothing kept.
         idle = StationRecorder(self.station, self.context, self.simulator, 1.0 / config.period)
         idle.anchor()
