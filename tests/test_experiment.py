@@ -228,12 +228,14 @@ def test_a_grid_prepares_a_skill_on_the_skill_s_scenario_under_its_scenario_file
     (``workflow.prepare``), on the skill's scenario under ``--scenario``, typed: no command's
     flags (a hand-built namespace once lacked ``--config`` and failed here)."""
     from drake_skill.experiments.grid import prepare_config
+    from drake_skill.skills import load_skill
 
     (tmp_path / "near.yaml").write_text("object: {x: 0.62}\n")
     config = prepare_config("draw", tmp_path / "near.yaml", quiet=True)
     assert (config.skill, config.quiet, config.fit, config.skill_dir, config.demos) == ("draw", True, "thesis",
                                                                                        None, None)
-    assert config.station.object.x == 0.62
-    assert prepare_config("draw").station.object.x == 0.68
+    spec = load_skill("draw")
+    assert config.station_for(spec).object.x == 0.62
+    assert prepare_config("draw").station_for(spec).object.x == 0.68
 
 

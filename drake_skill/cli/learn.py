@@ -180,16 +180,8 @@ def prepare_skill(args, out: Path) -> Path:
     """The fitted skill's directory (:func:`drake_skill.workflow.prepare.prepare_skill` on the flags)."""
     from drake_skill.workflow.prepare import PrepareConfig, prepare_skill as prepare
 
-    spec = errors.skill(args.skill) if args.skill is not None else None
-    if spec is None and args.demos is not None and args.skill_dir is None:
-        from drake_skill.demos.format import load_demonstrations
-
-        demos = load_demonstrations(args.demos)     # the scenario is the skill's the demonstrations name
-        name = demos[0].skill if demos else ""
-        spec = errors.skill(name, f"--demos {args.demos} (skill '{name}'; give its skill file as --skill)") \
-            if demos else None
     return prepare(PrepareConfig(skill=args.skill, skill_dir=args.skill_dir, demos=args.demos,
-                                 station=_station_config(args, spec) if spec is not None else None,
+                                 station_for=lambda spec: _station_config(args, spec),
                                  fit=getattr(args, "fit", "tolerance"), quiet=bool(args.quiet)), out)
 
 

@@ -305,7 +305,8 @@ def prepare_config(source: str, station_yaml: Path | None = None, quiet: bool = 
     [--scenario FILE] [--quiet] --fit FIT``: the skill's scenario under ``station_yaml``."""
     from drake_skill.workflow.prepare import PrepareConfig
 
-    return PrepareConfig(skill=str(source), station=station_config(source, station_yaml), fit=fit, quiet=quiet)
+    return PrepareConfig(skill=str(source), station_for=lambda spec: station_config(spec, station_yaml), fit=fit,
+                         quiet=quiet)
 
 
 def _copy_skill(source: Path, initial: Path, skill: str) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses as dc
 import sys
 from pathlib import Path
+from typing import Callable
 
 from drake_skill import inputs
 
@@ -23,15 +24,16 @@ class PrepareConfig:
     demonstrations or ``skill_dir`` name). skill_dir: a fitted skill to use
     as it is. demos: a folder of demo_*.npz files to fit from (neither
     ``skill_dir`` nor ``demos``: scripted demonstrations are recorded).
-    station: the scenario to record and refine on (StationConfig; None: the
-    skill's). fit: "tolerance" or "thesis" (docs/method.md 2.2). quiet: no
-    progress bars.
+    station_for: ``station_for(spec) -> StationConfig``, the scenario to
+    record and refine on for the skill once it is known (it may come from the
+    demonstrations); None: the skill's own. fit: "tolerance" or "thesis"
+    (docs/method.md 2.2). quiet: no progress bars.
     """
 
     skill: str | None = None
     skill_dir: Path | None = None
     demos: Path | None = None
-    station: object = None
+    station_for: Callable | None = None
     fit: str = "tolerance"
     quiet: bool = False
 
@@ -117,7 +119,8 @@ def prepare_skill(config: PrepareConfig, out: Path) -> Path:
         return initial
     if config.demos is not None:
         spec, demos = _user_demos(config, spec)
-    station = config.station if config.station is not None else (scenario_for_skill(spec) if spec else None)
+    station_for = config.station_for if config.station_for is not None else scenario_for_skill
+    station = station_for(spec) if spec is not None else None
     if config.demos is None:
         demos = _scripted_demos(config, spec, station, out / "demos")
     print(f"fitting '{spec.name}' from {len(demos)} demonstrations ...")
