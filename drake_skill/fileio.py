@@ -58,6 +58,27 @@ def load_json(path: str | os.PathLike, fix: str) -> Any:
         raise ValueError(f"{path}: damaged JSON (not UTF-8 text); {fix}") from None
 
 
+def read_csv_rows(path: str | os.PathLike, columns, what: str, fix: str) -> list[dict]:
+    """The rows of the CSV file ``path`` (dicts of strings), whose header must be ``columns``.
+
+    Another header is a ValueError saying the file is not ``what`` ("an
+    experiment table"); a damaged file (not UTF-8, a stray NUL) is one that
+    names it, the parser's reason and ``fix`` (what the user can do).
+    """
+    import csv
+
+    path = Path(path)
+    try:
+        with open(path, newline="") as f:
+            reader = csv.DictReader(f)
+            if tuple(reader.fieldnames or ()) != tuple(columns):
+                raise ValueError(f"{path}: not {what} (columns {reader.fieldnames}; "
+                                 f"expected {', '.join(columns)})")
+            return list(reader)
+    except (UnicodeDecodeError, csv.Error) as e:
+        raise ValueError(f"{path}: damaged CSV ({e}); {fix}") from None
+
+
 def atomic_save_npz(path: str | os.PathLike, arrays: Mapping[str, np.ndarray]) -> Path:
     """Saves arrays to an ``.npz`` atomically. Object arrays are refused."""
     import io

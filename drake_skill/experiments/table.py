@@ -23,7 +23,7 @@ import csv
 import io
 from pathlib import Path
 
-from drake_skill.fileio import atomic_write_text, load_json
+from drake_skill.fileio import atomic_write_text, load_json, read_csv_rows
 from drake_skill.learning.loop import REWARDS
 from drake_skill.learning.policy_search import METHODS
 
@@ -113,15 +113,7 @@ def read_table(path) -> list[dict]:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such table; run 'drake-skill experiment run' first")
     rebuild = "'drake-skill experiment run' with the grid's --out writes the table again from the stored runs"
-    try:
-        with open(path, newline="") as f:
-            reader = csv.DictReader(f)
-            if tuple(reader.fieldnames or ()) != COLUMNS:
-                raise ValueError(f"{path}: not an experiment table (columns {reader.fieldnames}; "
-                                 f"expected {', '.join(COLUMNS)})")
-            rows = list(reader)
-    except (UnicodeDecodeError, csv.Error) as e:
-        raise ValueError(f"{path}: damaged table ({e}); {rebuild}") from None
+    rows = read_csv_rows(path, COLUMNS, "an experiment table", rebuild)
     ints, floats = ("run", "episode", "rollouts_used", "success"), ("return", "held_out_after", "held_out_before")
     for line, row in enumerate(rows, start=2):
         try:

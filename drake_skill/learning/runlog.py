@@ -37,7 +37,7 @@ import sys
 from pathlib import Path
 from typing import Callable
 
-from drake_skill.fileio import atomic_write_text
+from drake_skill.fileio import atomic_write_text, read_csv_rows
 
 __all__ = ["PROGRESS_COLUMNS", "RunLog", "VERSIONED_PACKAGES", "progress_row", "read_progress", "software_versions"]
 
@@ -103,12 +103,8 @@ def _append(path: Path, text: str) -> None:
 
 def read_progress(path) -> list[dict]:
     """The rows of a ``progress.csv``, typed as :func:`progress_row` makes them (empty cells None)."""
-    with open(path, newline="") as f:
-        reader = csv.DictReader(f)
-        if tuple(reader.fieldnames or ()) != PROGRESS_COLUMNS:
-            raise ValueError(f"{path}: not a learning run's progress.csv (columns {reader.fieldnames}; "
-                             f"expected {', '.join(PROGRESS_COLUMNS)})")
-        rows = list(reader)
+    rows = read_csv_rows(path, PROGRESS_COLUMNS, "a learning run's progress.csv",
+                         "summary.json and results.jsonl beside it hold the same curve")
     floats = ("greedy_return", "mean_return", "best_return", "exploration")
     for row in rows:
         for key in PROGRESS_COLUMNS:
