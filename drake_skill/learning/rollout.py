@@ -436,21 +436,20 @@ class RolloutRunner:
         try:
             self._run(weights, result)
         except Exception as error:   # recorded, the run goes on (docs/method.md section 5)
-            result = RolloutResult(seed=seed, failed=True, reason=classify_failure(error),
+            reason = classify_failure(error)
+            result = RolloutResult(seed=seed, failed=True, reason=reason,
                                    message=f"{type(error).__name__}: {error}"[:500],
                                    object_pose=result.object_pose, object_pose_true=result.object_pose_true,
-                                   contact=self._contact(error))
+                                   contact=self._contact(error) if reason == "reflex" else None)
         finally:
             logger.removeFilter(counter)
         result.wall_s = time.perf_counter() - start
         result.ik_warnings = counter.count
         return result
 
-    def _contact(self, error) -> dict | None:
+    def _contact(self, error) -> dict:
         """A reflex trip's ``{"pairs", "point", "t", "cause"}`` (the contacts at the stop; pairs and
-        point None on the robot, which reports no contacts); None for other failures."""
-        if classify_failure(error) != "reflex":
-            return None
+        point None on the robot, which reports no contacts)."""
         report = getattr(self.station, "contact_report", None)
         try:
             contact = report(self.context) if report is not None else {"pairs": None, "point": None}

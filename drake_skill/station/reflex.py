@@ -162,36 +162,37 @@ class RobotSceneContactForce(LeafSystem):
 
     def _calc(self, context, output):
         results = self._results.Eval(context)
-        robot, force = self._robot, 0.0
-        for i in range(results.num_point_pair_contacts()):
-            info = results.point_pair_contact_info(i)
-            if (int(info.bodyA_index()) in robot) != (int(info.bodyB_index()) in robot):
-                force += float(np.linalg.norm(info.contact_force()))
+        force = 0.0
+        for _, _, info in robot_scene_contacts(results, self._robot):
+            force += float(np.linalg.norm(info.contact_force()))
         output.SetAtIndex(0, force)
+
+
+def robot_scene_contacts(results, robot):
+    """``(robot body index, other body index, PointPairContactInfo)`` of every point contact in
+    ``results`` (a ContactResults) between a body in ``robot`` (a set of body indices as ints) and
+    anything else, in ``results``' order: what :class:`RobotSceneContactForce` sums and a reflex
+    trip's record names."""
+    for i in range(results.num_point_pair_contacts()):
+        info = results.point_pair_contact_info(i)
+        a, b = int(info.bodyA_index()), int(info.bodyB_index())
+        if (a in robot) != (b in robot):
+            yield (a, b, info) if a in robot else (b, a, info)
 
 
 def robot_scene_pairs(plant, results, robot_bodies) -> list[dict]:
     """The robot-scene point contacts in ``results`` (a ContactResults of ``plant``), strongest first:
-    ``{"a": "model::body" (the robot's), "b": "model::body", "force_N": |f|, "point": [x, y, z] (W, m)}``,
-    the same pairs :class:`RobotSceneContactForce` sums."""
+    ``{"a": "model::body" (the robot's), "b": "model::body", "force_N": |f|, "point": [x, y, z] (W, m)}``."""
     from pydrake.multibody.tree import BodyIndex
 
-    robot = frozenset(int(b) for b in robot_bodies)
-
     def name(index) -> str:
-        body = plant.get_body(BodyIndex(int(index)))
+        body = plant.get_body(BodyIndex(index))
         return f"{plant.GetModelInstanceName(body.model_instance())}::{body.name()}"
 
-    pairs = []
-    for i in range(results.num_point_pair_contacts()):
-        info = results.point_pair_contact_info(i)
-        a, b = int(info.bodyA_index()), int(info.bodyB_index())
-        if (a in robot) == (b in robot):
-            continue
-        if b in robot:
-            a, b = b, a
-        pairs.append({"a": name(a), "b": name(b), "force_N": float(np.linalg.norm(info.contact_force())),
-                      "point": [float(v) for v in info.contact_point()]})
+    robot = frozenset(int(b) for b in robot_bodies)
+    pairs = [{"a": name(a), "b": name(b), "force_N": float(np.linalg.norm(info.contact_force())),
+              "point": [float(v) for v in info.contact_point()]}
+             for a, b, info in robot_scene_contacts(results, robot)]
     return sorted(pairs, key=lambda p: -p["force_N"])
 
 
