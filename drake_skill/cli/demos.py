@@ -179,7 +179,7 @@ def warn_force_margin(demos, paths, reflex) -> None:
 
 def record(args) -> int:
     from drake_skill.demos.demonstrator import DemonstratorConfig, load_demonstrator_config
-    from drake_skill.demos.format import existing_demo_files, load_demonstrations, save_demonstrations
+    from drake_skill.demos.format import existing_demo_files, save_demonstrations
 
     # Everything a user can get wrong is checked before the first simulation.
     if args.count < 0:
@@ -200,8 +200,8 @@ def record(args) -> int:
     if args.interactive:
         from drake_skill.demos.teleop import RecordingInterrupted, TeleopConfig, record_interactive_into
 
-        def plot(tmp):
-            _plot(load_demonstrations(tmp), tmp / "demos.png")
+        def plot(tmp, demos):
+            _plot(demos, tmp / "demos.png")
 
         try:
             paths, demos = record_interactive_into(

@@ -432,8 +432,8 @@ def record_interactive_into(directory, skill, count: int, force: bool = False, e
     ``force`` replaces a set already there (the new one grows beside it and
     replaces it whole). Ctrl-C or SIGTERM keeps every finished demonstration
     (replacing the old set once one is finished) and raises
-    :class:`RecordingInterrupted` saying how many were kept. ``extra(tmp)``
-    writes more files into the finished set (``demos record``'s plot);
+    :class:`RecordingInterrupted` saying how many were kept. ``extra(tmp,
+    demos)`` writes more files into the finished set (``demos record``'s plot);
     ``kwargs`` go to :func:`record_interactive`.
     """
     from drake_skill.common import terminate_as_interrupt
@@ -445,4 +445,4 @@ def record_interactive_into(directory, skill, count: int, force: bool = False, e
             demos = record_interactive(skill, count, on_demo=writer.add, **kwargs)
     except KeyboardInterrupt:
         raise RecordingInterrupted(writer.interrupted()) from None
-    return writer.finish(extra=extra), demos
+    return writer.finish(extra=None if extra is None else lambda tmp: extra(tmp, demos)), demos

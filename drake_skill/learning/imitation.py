@@ -221,9 +221,9 @@ class Imitator:
             if not drawn:
                 del station.random_object_pose
 
-    def _start(self, weights, seed: int, goal, y0_demo, tau: float) -> np.ndarray:
+    def _start(self, weights, seed: int, goal, y0_demo, tau: float | None = None) -> np.ndarray:
         """Resets the runner (object pose from ``seed``) and starts its DMP at the measured hand pose in O
-        toward ``goal`` over ``tau`` s; returns that start."""
+        toward ``goal`` (over ``tau`` s, when given); returns that start."""
         runner = self.runner
         runner.reset(weights, seed)
         dmp_context = runner.dmp_system.GetMyMutableContextFromRoot(runner.context)
@@ -231,7 +231,8 @@ class Imitator:
         if np.dot(y0[3:], goal[3:]) < 0:
             y0[3:] *= -1
         runner.dmp_system.set_start_goal(dmp_context, y0, goal, y0_demo=y0 if y0_demo is None else y0_demo)
-        runner.dmp_system.set_duration(dmp_context, tau)
+        if tau is not None:
+            runner.dmp_system.set_duration(dmp_context, tau)
         return y0
 
     def move_to_start(self, demo, speed: float = 0.1, min_duration: float = 2.0, within: float = 0.002) -> float:
@@ -252,7 +253,7 @@ class Imitator:
         goal = np.asarray(demo.X_OE_100hz[0], dtype=float)
         X_WO, drawn = self._object_pose(demo)
         with self._placed(X_WO, drawn):
-            y0 = self._start(np.zeros(runner.weights_shape), int(demo.seed), goal, None, 1.0)
+            y0 = self._start(np.zeros(runner.weights_shape), int(demo.seed), goal, None)
         distance = float(np.linalg.norm(goal[:3] - y0[:3]))
         if distance <= within:
             return distance
