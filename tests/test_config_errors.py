@@ -71,6 +71,13 @@ def test_a_damaged_run_or_grid_file_names_itself_and_the_fix(tmp_path):
     with pytest.raises(ValueError, match=r"summary.json: not a run summary \(needs skill, method, reward, run\)"):
         stored_runs(tmp_path / "grid")
 
+    from drake_skill.learning.runlog import PROGRESS_COLUMNS, read_progress
+
+    progress = tmp_path / "progress.csv"
+    progress.write_bytes((",".join(PROGRESS_COLUMNS) + "\n").encode() + b"\xff\xfe0,1")
+    with pytest.raises(ValueError, match=r"progress.csv: damaged CSV \(.*\); summary.json and results.jsonl beside it"):
+        read_progress(progress)
+
     table = tmp_path / "table.csv"
     table.write_text(",".join(COLUMNS) + "\n" + "open,pi2,dense,0,1")
     with pytest.raises(ValueError) as raised:
