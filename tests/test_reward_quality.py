@@ -126,7 +126,7 @@ def test_bench_bad_input_is_one_line_and_exit_status_2(capsys, tmp_path):
                                 "file to record and fit, or a fitted skill's folder)")
     assert bench(capsys, "--skill", "open", "--rollouts", "0") == (
         2, "drake-skill: error: --rollouts must be at least 1, got 0")
-    assert bench(capsys, "--skill-dir", str(tmp_path / "nope")) == (
+    assert bench(capsys, "--skill-dir", str(tmp_path / "nope"), "--rollouts", "3") == (
         2, f"drake-skill: error: --skill-dir {tmp_path / 'nope'}: no such folder; give the folder of a "
            "fitted skill (drake-skill fit --out / learn --out)")
 
