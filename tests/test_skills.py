@@ -31,8 +31,13 @@ def _write(tmp_path, name="push", scenario="drawer", joint="drawer_slide", rule=
     return path
 
 
+#: The shipped skills by name: the thesis's three, Slide, and the new kinds of object
+#: (docs/skills.md "The shipped skills").
+SHIPPED = ["close", "draw", "open", "press", "slide"]
+
+
 def test_the_shipped_skills_are_data_files():
-    assert shipped_skill_names() == ["close", "draw", "open", "slide"]
+    assert shipped_skill_names() == SHIPPED
     opened, closed, drawn = load_skill("open"), load_skill("close"), load_skill("draw")
     # Thesis 6.2 and Table 6.1; docs/method.md section 5 for the exploration scales.
     # dmp_bases left out: fit chooses B from the tolerance (docs/method.md 2.2); the thesis's
@@ -124,7 +129,7 @@ def test_keyframes_beyond_the_reach_name_the_distance(tmp_path):
 def test_skills_command_lists_the_shipped_skills_and_checks_a_file(tmp_path):
     listing = subprocess.run([sys.executable, "-m", "drake_skill.cli.main", "skills"], capture_output=True,
                              text=True, check=True).stdout
-    assert [line.split()[0] for line in listing.splitlines()[1:5]] == ["close", "draw", "open", "slide"]
+    assert [line.split()[0] for line in listing.splitlines()[1:1 + len(SHIPPED)]] == SHIPPED
     assert re.search(r"open\s+box_closed\s+3\s+auto\s+0.1\s+random\s+lid_hinge >= 1.7 after 1 s\s+16", listing)
     assert re.search(r"draw\s+drawer\s+2\s+auto\s+0.1\s+best-return\s+drawer_slide >= 0.1 after 1 s\s+6", listing)
     bad = subprocess.run([sys.executable, "-m", "drake_skill.cli.main", "skills",
