@@ -189,7 +189,8 @@ def test_a_learning_run_on_the_simulated_robot(tmp_path, tmp_path_factory):
                            station=build_hardware_station(hardware_config, lcm=lcm))
     robot.start(seed=3)
     try:
-        outcome = learn(shared["skill_dir"], tmp_path / "learn", LearnConfig(episodes=1, rollouts=2, held_out=0),
+        outcome = learn(shared["skill_dir"], tmp_path / "learn", LearnConfig(episodes=1, rollouts=2, held_out=0,
+                                                                             select_poses=1),
                         station_config=hardware_config.station, rollout_config=rollout_config(), runner=runner,
                         replay=False, progress=False, log=open(os.devnull, "w"))
     finally:
@@ -198,6 +199,8 @@ def test_a_learning_run_on_the_simulated_robot(tmp_path, tmp_path_factory):
     records = [json.loads(line) for line in (tmp_path / "learn" / "results.jsonl").read_text().splitlines()]
     rollouts = [r for r in records if r.get("type") in ("rollout", "greedy")]
     assert len(rollouts) >= 4 and not any(r["failed"] for r in rollouts), rollouts
+    select = records[-1]         # the guarded selection ran the start and the last mean on the robot
+    assert select["type"] == "select" and [len(c["executions"]) for c in select["candidates"]] == [1, 1]
     assert all(r["n_frames"] > 10 for r in rollouts)   # the learned reward saw the robot's camera
     assert (tmp_path / "learn" / "skill" / "skill.json").is_file()
     accepted, dropped = robot.command_counts()

@@ -55,16 +55,22 @@ def test_learn_writes_every_artifact(learned, capsys):
     assert summary["n_rollouts"] == 2
     records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
     # Seed 5: the greedy execution succeeds on its pose before learning and fails after
-    # the one update (both rollouts failed); of the two held-out poses the second
-    # succeeds before learning, neither after.
+    # the one update (both rollouts failed). The guarded selection (docs/method.md 5.1) sees it
+    # by the learned verdicts and returns alone and returns the start: of the two held-out poses the
+    # second succeeds before learning and after (the last mean succeeded on neither).
     assert summary["greedy_success"] == [True, False]
+    assert (summary["select"], summary["selected_episode"]) == ("guarded", 0)
     held = [r for r in records if r["type"] == "held_out"]
-    assert [r["successes"] for r in held] == [[False, True], [False, False]]
+    assert [r["successes"] for r in held] == [[False, True], [False, True]]
     assert [r["success_rate"] for r in held] == [summary["held_out_before"], summary["held_out_after"]]
-    assert summary["held_out_before"] == 0.5 and summary["held_out_after"] == 0.0
+    assert summary["held_out_before"] == 0.5 and summary["held_out_after"] == 0.5
     # The greedy execution before learning waits for the one after the update (GREEDY_BATCH = 2).
     assert [r["type"] for r in records] == ["held_out", "rollout", "rollout", "greedy", "episode", "greedy",
-                                           "episode", "held_out"]
+                                           "episode", "select", "held_out"]
+    select = records[-2]
+    # Two of three verdicts each: the start's higher mean learned return decides.
+    assert [(c["episode"], c["verdict_successes"]) for c in select["candidates"]] == [(0, 2), (1, 2)]
+    assert select["candidates"][0]["mean_return"] > select["candidates"][1]["mean_return"]
     assert [r["episode"] for r in records if r["type"] == "episode"] == [0, 1]
     # progress.csv: the curve's rows (greedy success True, False, as above).
     rows = read_progress(out / "progress.csv")
@@ -82,7 +88,8 @@ def test_learn_writes_every_artifact(learned, capsys):
         assert "animation" in html.lower()
     learned_skill = Skill.load(out / "skill")
     assert learned_skill.info["learning"]["episodes"] == 1
-    assert not np.array_equal(learned_skill.initial_weights, Skill.load(shared["skill_dir"]).initial_weights)
+    # The returned skill is the start (selected above), not the last mean.
+    np.testing.assert_array_equal(learned_skill.initial_weights, Skill.load(shared["skill_dir"]).initial_weights)
 
 
 def test_held_out_poses_are_the_fixed_seeds_not_the_training_ones(learned):

@@ -147,10 +147,21 @@ def test_resume_after_an_interruption_reproduces_the_uninterrupted_run(tmp_path_
     kinds = [r["type"] for r in lines["whole"]]
     assert kinds.count("rollout") == 4 and kinds.count("greedy") == 3 and kinds.count("held_out") == 2
     assert resumed.summary["curve"] == whole.summary["curve"]
-    # The learned skill holds the final mean and loads back.
+    # The guarded selection (docs/method.md 5.1) ran the start, the best greedy mean (update 1: the
+    # highest greedy return, 150.7) and the last on 3 shared poses and kept update 1: 3 of 3 verdicts
+    # like the start, and the higher mean return.
+    select = [r for r in lines["whole"] if r["type"] == "select"]
+    assert len(select) == 1 and select[0]["episode"] == 1 == whole.summary["selected_episode"]
+    scores = [(c["episode"], c["verdict_successes"], round(c["mean_return"], 1)) for c in select[0]["candidates"]]
+    assert scores == [(0, 3, 142.3), (1, 3, 143.8), (2, 2, 99.6)]
+    assert len({tuple(e["seed"] for e in c["executions"]) for c in select[0]["candidates"]}) == 1
+    # The learned skill holds the selected mean and loads back.
     learned = Skill.load(tmp_path / "part" / "skill")
-    np.testing.assert_array_equal(learned.initial_weights, whole.search.mean)
+    np.testing.assert_array_equal(learned.initial_weights, whole.weights)
+    np.testing.assert_array_equal(whole.weights, json.loads(
+        (tmp_path / "whole" / "checkpoint" / "state.json").read_text())["candidates"]["1"])
     assert learned.info["learning"]["method"] == "pi2-es-cov"
+    assert (learned.info["learning"]["select"], learned.info["learning"]["selected_episode"]) == ("guarded", 1)
     # The search moved: the learned weights are not the initial ones.
     assert not np.array_equal(learned.initial_weights, Skill.load(shared["skill_dir"]).initial_weights)
 
@@ -233,3 +244,50 @@ def test_the_git_commit_is_recorded_only_for_a_drake_skill_checkout(tmp_path):
     assert _git_commit(tmp_path / "venv" / "site-packages") == (None, None)
     commit, dirty = _git_commit(tmp_path)
     assert len(commit) == 40 and dirty is False
+
+
+def _execution(verdict, dense, failed=False):
+    return {"seed": 1, "failed": failed, "reason": "reflex" if failed else "", "verdict": verdict,
+            "dense_return": dense, "success": verdict, "final_object_state": 0.0}
+
+
+def test_the_guarded_selection_keeps_the_start_unless_a_learned_mean_scores_at_least_as_well():
+    from drake_skill.learning.selection import Candidate, best_greedy_episode, choose, score, select_seed
+
+    start = Candidate(0, [_execution(True, 300.0), _execution(True, 280.0)])
+    worse = Candidate(5, [_execution(True, 900.0), _execution(False, 50.0)])      # a verdict lost
+    tripped = Candidate(3, [_execution(True, 999.0, failed=True), _execution(True, 400.0)])   # a trip: a failure
+    assert score(start.executions) == (2, 290.0) and score(tripped.executions) == (1, 200.0)
+    assert choose([start, worse, tripped]) is start
+    better = Candidate(5, [_execution(True, 300.0), _execution(True, 281.0)])
+    assert choose([start, better]) is better
+    equal = Candidate(5, [_execution(True, 280.0), _execution(True, 300.0)])
+    assert choose([start, equal]) is equal                      # a tie goes to the later mean
+    assert choose([Candidate(0, []), start]) is start
+    with pytest.raises(ValueError, match="no candidate"):
+        choose([])
+    greedy = [{"episode": e, **_execution(v, r, f)} for e, v, r, f in
+              ((0, True, 900.0, False), (1, True, 200.0, False), (2, True, 500.0, True), (3, True, 200.0, False))]
+    assert best_greedy_episode(greedy) == 3 and best_greedy_episode(greedy[:1]) is None
+    seeds = {select_seed(0, k) for k in range(10)}
+    assert len(seeds) == 10 and not seeds & {pose_seed(0, e, c) for e in range(6) for c in range(6)}
+
+
+def test_a_run_that_makes_the_skill_worse_returns_the_start(tmp_path_factory, tmp_path):
+    """Exploration 100 x Sigma_0 throws the mean far off; the guarded selection, judging by the learned
+    verdict and return alone, returns the start W_0, and its held-out success is the start's."""
+    shared = shared_skill(tmp_path_factory)
+    config = LearnConfig(episodes=1, rollouts=2, held_out=1, seed=2, exploration_scale=100.0, select_poses=2)
+    outcome = learn(shared["skill_dir"], tmp_path / "run", config, station_config=shared["station"],
+                    rollout_config=rollout_config(), replay=False, progress=False, log=io.StringIO())
+    s = outcome.summary
+    assert s["selected_episode"] == 0 and s["held_out_after"] == s["held_out_before"]
+    np.testing.assert_array_equal(outcome.weights, Skill.load(shared["skill_dir"]).initial_weights)
+    np.testing.assert_array_equal(Skill.load(tmp_path / "run" / "skill").initial_weights, outcome.weights)
+    assert not np.array_equal(outcome.search.mean, outcome.weights)
+    select = [json.loads(line) for line in (tmp_path / "run" / "results.jsonl").read_text().splitlines()][-2]
+    assert select["type"] == "select" and [c["episode"] for c in select["candidates"]] == [0, 1]
+    start, last = select["candidates"]
+    assert (start["verdict_successes"], start["mean_return"]) > (last["verdict_successes"], last["mean_return"])
+    with pytest.raises(ValueError, match="select"):
+        LearnConfig(select="best").validate()

@@ -52,7 +52,6 @@ DEFAULT_OUT = Path("results") / "reward_quality"
 
 
 def _parser() -> argparse.ArgumentParser:
-    from drake_skill.cli import options
     from drake_skill.learning.config import HELD_OUT_SEED0
 
     parser = argparse.ArgumentParser(prog="drake-skill bench reward_quality", description=__doc__,
@@ -71,7 +70,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=Path, default=None,
                         help="folder for reward_quality.json and return_vs_state.png (default: the skill "
                              "folder with --skill-dir, results/reward_quality/NAME with --skill)")
-    options.add_ground_truth_pose(parser)
+    parser.add_argument("--ground-truth-pose", action="store_true",
+                        help="object frame from the simulator's ground truth instead of the camera's segmenter")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     return parser
@@ -177,8 +177,8 @@ def table(report: dict) -> str:
 
 
 def main(argv=None) -> int:
-    from drake_skill.cli import options
     from drake_skill.fileio import atomic_write_json
+    from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.reward_quality import plot_return_vs_state
 
     args = _parser().parse_args(argv)
@@ -188,9 +188,10 @@ def main(argv=None) -> int:
 
         args.workers = default_workers()
     skill_dir, out = _skill_dir(args)
+    rollout = RolloutConfig(object_pose="ground_truth" if args.ground_truth_pose else "perceived")
     report = measure(skill_dir, rollouts=args.rollouts, demo_poses=args.demo_poses, seed0=args.seed0,
                      exploration_scale=args.exploration_scale, workers=args.workers,
-                     rollout_config=options.rollout_config(args), progress=not (args.quiet or args.json))
+                     rollout_config=rollout, progress=not (args.quiet or args.json))
     json_path = atomic_write_json(Path(out) / "reward_quality.json", report)
     rule = report["rule"]
     plot = plot_return_vs_state(report["records"], rule, Path(out) / "return_vs_state.png",

@@ -84,6 +84,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     search.add_argument("--seed", type=int, default=None, help="policy search and object-pose seed (default 0)")
     search.add_argument("--held-out", type=int, default=None,
                         help="held-out object poses for greedy success before and after (0: off; default 10)")
+    search.add_argument("--select", choices=("guarded", "last"), default=None,
+                        help="which policy the run returns: guarded (default) runs the start, the best-scoring "
+                             "greedy mean and the last on --select-poses shared poses and keeps the best by the "
+                             "learned verdict and return (never the ground truth; docs/method.md 5.1); last: "
+                             "the final mean, as the thesis does")
+    search.add_argument("--select-poses", type=int, default=None, metavar="N",
+                        help="object poses each guarded candidate runs on (default 3)")
     run = parser.add_argument_group("run")
     run.add_argument("--workers", type=int, default=None,
                         help="rollout worker processes (default: one per CPU this process may use, "
@@ -124,7 +131,8 @@ def _station_config(args, skill):
 
 
 _FILE_FLAGS = ("skill", "skill_dir", "demos", "out")
-_LEARN_FLAGS = ("method", "reward", "weighting", "episodes", "rollouts", "seed", "held_out", "exploration_scale")
+_LEARN_FLAGS = ("method", "reward", "weighting", "episodes", "rollouts", "seed", "held_out", "exploration_scale",
+                "select", "select_poses")
 
 
 def _apply_config_file(args) -> None:
@@ -197,9 +205,9 @@ def run(args: argparse.Namespace) -> int:
         from drake_skill.learning.workers import default_workers
 
         args.workers = default_workers()
-    for name in ("episodes", "rollouts", "workers"):
+    for name in ("episodes", "rollouts", "workers", "select_poses"):
         if getattr(args, name) < 1:
-            raise ValueError(f"--{name} must be at least 1, got {getattr(args, name)}")
+            raise ValueError(f"--{name.replace('_', '-')} must be at least 1, got {getattr(args, name)}")
     if args.held_out < 0:
         raise ValueError(f"--held-out must be 0 (off) or a number of poses, got {args.held_out}")
     if args.resume and args.force:
@@ -224,7 +232,8 @@ def run(args: argparse.Namespace) -> int:
     skill = Skill.load(skill_dir)
     config = LearnConfig(method=args.method, reward=args.reward, weighting=args.weighting or "",
                          episodes=args.episodes, rollouts=args.rollouts, seed=args.seed,
-                         held_out=args.held_out, exploration_scale=args.exploration_scale)
+                         held_out=args.held_out, exploration_scale=args.exploration_scale,
+                         select=args.select, select_poses=args.select_poses)
     rollout = options.rollout_config(args)
     meshcat = None
     if args.meshcat:
@@ -240,6 +249,9 @@ def run(args: argparse.Namespace) -> int:
     if before is not None:
         print(f"held-out greedy success: {before * 100:.0f} % before, {after * 100:.0f} % after learning "
               f"({config.held_out} poses)")
+    if s.get("select") == "guarded":
+        print(f"returned the policy after update {s['selected_episode']} of {s['episodes']} (--select guarded: "
+              "the best of the start, the best greedy mean and the last, by the learned verdict and return)")
     print(f"wrote {out}/ ({', '.join(s['artifacts'])})")
     return 0
 

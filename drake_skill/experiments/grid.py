@@ -139,11 +139,13 @@ class GridConfig:
         return int(self.episodes), int(self.rollouts)
 
     def learn_config(self, method: str, reward: str, run: int) -> LearnConfig:
-        """``learn``'s settings of run ``run`` of a cell (held-out off: the grid measures it)."""
+        """``learn``'s settings of run ``run`` of a cell (held-out off: the grid measures it; the final
+        mean returned, as the thesis's chapter 7 does)."""
         episodes, rollouts = self.budget(method)
         every = int(self.rollouts) if method == "power" else 1
         return LearnConfig(method=method, reward=reward, episodes=episodes, rollouts=rollouts,
-                           seed=int(self.seed0) + int(run), held_out=0, greedy_every=every).validate()
+                           seed=int(self.seed0) + int(run), held_out=0, greedy_every=every,
+                           select="last").validate()
 
     def settings(self) -> dict[str, Any]:
         """What decides the numbers of a run beyond its cell (kept in ``grid.json``)."""

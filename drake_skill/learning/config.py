@@ -12,6 +12,7 @@ from typing import Any
 
 from drake_skill import configs
 from drake_skill.learning.policy_search import METHODS
+from drake_skill.learning.selection import SELECT_RULES
 
 __all__ = ["LearnConfig", "REWARDS"]
 
@@ -50,6 +51,12 @@ class LearnConfig:
       from that covariance; the covariance floor follows it). None: the
       skill file's ``exploration_scale`` (``learn`` saves the value it used).
       The thesis sets it to 1 (docs/method.md section 5).
+    select: which mean the run returns (docs/method.md 5.1,
+      :mod:`~drake_skill.learning.selection`): "guarded" (default: the start,
+      the best-scoring greedy mean or the last, whichever scores best by the
+      learned verdict and return on ``select_poses`` shared poses) or "last"
+      (the thesis's final mean; the chapter-7 grid).
+    select_poses: object poses each guarded candidate runs on (>= 1).
     """
 
     method: str = "pi2-es-cov"
@@ -62,6 +69,8 @@ class LearnConfig:
     held_out_seed0: int = HELD_OUT_SEED0
     exploration_scale: typing.Optional[float] = None
     greedy_every: int = 1
+    select: str = "guarded"
+    select_poses: int = 3
 
     def validate(self) -> "LearnConfig":
         bad = functools.partial(configs.bad, "learn config")
@@ -81,6 +90,10 @@ class LearnConfig:
             bad("rollouts", self.rollouts, f"at least {min_rollouts} per episode for {self.method}")
         if int(self.greedy_every) < 1:
             bad("greedy_every", self.greedy_every, "at least 1 (a greedy execution after every n-th update)")
+        if self.select not in SELECT_RULES:
+            bad("select", self.select, "'guarded' (never return a policy that scores below the start) or 'last'")
+        if int(self.select_poses) < 1:
+            bad("select_poses", self.select_poses, "at least 1 object pose per candidate")
         if int(self.held_out) < 0:
             bad("held_out", self.held_out, "0 (off) or a number of poses")
         if self.exploration_scale is not None and not valid_exploration_scale(self.exploration_scale):

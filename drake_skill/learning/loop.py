@@ -11,7 +11,8 @@ docs/method.md section 5, docs/architecture.md "The outer loop"::
         search.tell(samples, returns or per-step rewards)
         greedy execution of search.mean                  (episode e)
         checkpoint
-    held-out greedy success of the final mean            (after learning)
+    select the returned mean (guarded: W_0, best greedy, W_E on shared poses)
+    held-out greedy success of the selected mean         (after learning)
 
 The greedy executions run two at a time beside the next episode's rollouts
 (:data:`GREEDY_BATCH`), which changes no number, only when they run.
@@ -28,12 +29,15 @@ from seeds derived from ``(seed, e, c)`` (:func:`pose_seed`); the held-out
 poses are the seeds ``held_out_seed0 + i`` (the same for every run, none of
 them a demonstration's or a training rollout's in practice).
 
-The run is a :class:`LearningRun` (settings, a :class:`RunState`, a pool)
-whose methods are the steps above: :meth:`~LearningRun.start` or
-:meth:`~LearningRun.resume`, :meth:`~LearningRun.batch` (an episode's
-rollouts and update, with the due greedy executions),
-:meth:`~LearningRun.checkpoint`, :meth:`~LearningRun.end`; :func:`learn`
-drives one from start to end (``drake-skill learn``, the experiment grid's
+The run is a :class:`LearningRun` (settings, a typed
+:class:`~drake_skill.learning.runstate.RunState`, a pool) whose methods are
+the steps above: :meth:`~LearningRun.start` or :meth:`~LearningRun.resume`;
+per batch :meth:`~LearningRun.ask` (the samples and the due greedy
+executions, a :class:`Batch`), :meth:`~LearningRun.evaluate` (their
+executions), :meth:`~LearningRun.tell` (records, the update, the next
+greedy execution) and :meth:`~LearningRun.checkpoint`; then
+:meth:`~LearningRun.select` (docs/method.md 5.1) inside
+:meth:`~LearningRun.end`; :func:`learn` drives one from start to end (``drake-skill learn``, the experiment grid's
 runs, ``drake-skill hardware run --episodes``).
 
 Artifacts in the output directory (:data:`ARTIFACTS`): ``config.json``
@@ -68,15 +72,15 @@ from typing import Any, Callable
 import numpy as np
 
 from drake_skill.common import frame_meshcat_camera
-from drake_skill.fileio import atomic_save_npz, atomic_write_json, atomic_write_text, load_json, load_npz
+from drake_skill.fileio import atomic_write_json, atomic_write_text, load_json
+from drake_skill.learning import selection
 from drake_skill.learning.config import REWARDS, LearnConfig
 from drake_skill.learning.evaluation import HELD_OUT_SEED0, evaluate_greedy
 from drake_skill.learning.plots import plot_learning_curve
-from drake_skill.learning.policy_search import PER_STEP_METHODS, make_policy_search, policy_search_from_state
+from drake_skill.learning.policy_search import PER_STEP_METHODS, make_policy_search
 from drake_skill.learning.runlog import RunLog, software_versions
-
-#: What to do with a run whose checkpoint or config.json is damaged (a copy cut short).
-_DAMAGED_RUN = "the run cannot be resumed from it: start over with --force, or delete the run folder"
+from drake_skill.learning.runstate import (DAMAGED_RUN, RunState, curve_row, episode_rewards, exploration_size,
+                                           pose_seed)
 
 __all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "REWARDS", "LearnConfig", "LearnOutcome", "LearningRun", "RunState",
            "episode_rewards", "learn", "pose_seed"]
@@ -94,24 +98,6 @@ def exploration_scales_text() -> str:
     return ", ".join(f"{spec.name} {spec.exploration_scale:g}" for spec in shipped_skills())
 
 
-def _block_row(records, episode: int, every: int, exploration_at: dict, mean) -> dict:
-    """The curve row of update ``episode``: its rollouts and those of the updates since the last greedy one.
-
-    With a greedy execution after every update (``every`` = 1) the block is
-    the episode's own rollouts; PoWER's 30 x 1 with one every 6 sums 6 of them.
-    """
-    first = ((episode - 1) // every) * every + 1
-    block = [r for r in records if r["type"] == "rollout" and first <= r["episode"] <= episode]
-    returns = [r["reward"] for r in block]
-    return {"episode": episode, "mean_return": float(np.mean(returns)), "best_return": float(np.max(returns)),
-            "exploration": exploration_at[first],
-            "failures": dict(Counter(r["reason"] for r in block if r["failed"])),
-            "rollout_successes": int(sum(r["success"] for r in block)),
-            "ik_warnings": int(sum(r["ik_warnings"] for r in block)), "mean": np.asarray(mean).tolist()}
-
-
-_CHECKPOINT_FORMAT = 2
-
 #: Greedy executions wait until this many are due and then run beside the next
 #: episode's rollouts (all that are left after the last update). One greedy
 #: execution beside an even number of rollouts would leave one of two workers
@@ -119,43 +105,6 @@ _CHECKPOINT_FORMAT = 2
 #: the number of workers, so that the records come out in the same order on
 #: any pool.
 GREEDY_BATCH = 2
-
-
-def pose_seed(run_seed: int, episode: int, index: int | None = None) -> int:
-    """Object-pose seed of rollout ``index`` of episode ``episode`` (1-based), or,
-    with ``index=None``, of the greedy execution after that episode's update
-    (episode 0: before learning). A 31-bit integer from ``numpy.random.SeedSequence``."""
-    key = [int(run_seed), int(episode), 0 if index is None else 1, 0 if index is None else int(index)]
-    return int(np.random.SeedSequence(key).generate_state(1)[0] >> 1)
-
-
-def episode_rewards(results, reward: str, per_step: bool) -> np.ndarray:
-    """What ``tell`` takes from an episode's results: returns ``(C,)`` or per-step ``(C, T)``.
-
-    dense: R(G) (Eq. 4.5) / the filtered per-step rewards (zero-padded to the
-    longest rollout); sparse: the verdict as 1/0 (per step: at the last step).
-    Failed rollouts count 0.
-    """
-    if not per_step:
-        if reward == "dense":
-            return np.array([0.0 if r.failed else float(r.dense_return) for r in results])
-        return np.array([0.0 if r.failed else float(r.verdict) for r in results])
-    length = max([len(r.filtered_rewards) for r in results] + [1])
-    out = np.zeros((len(results), length))
-    for i, r in enumerate(results):
-        if r.failed:
-            continue
-        if reward == "dense":
-            out[i, :len(r.filtered_rewards)] = r.filtered_rewards
-        else:
-            out[i, -1] = float(r.verdict)
-    return out
-
-
-def exploration_size(search) -> float:
-    """RMS standard deviation of the sampling distribution: sqrt(mean_b trace(s Sigma_b) / D)."""
-    cov = search.sampling_covariances
-    return float(np.sqrt(np.mean(np.trace(cov, axis1=1, axis2=2)) / cov.shape[-1]))
 
 
 @dc.dataclass
@@ -166,6 +115,25 @@ class LearnOutcome:
     out_dir: Path
     complete: bool
     search: Any = None
+    #: The policy the run returns (B x 7): the selected mean (``LearnConfig.select``); None until complete.
+    weights: Any = None
+
+
+@dc.dataclass
+class Batch:
+    """What :meth:`LearningRun.ask` hands :meth:`~LearningRun.evaluate` and :meth:`~LearningRun.tell`.
+
+    due: the pending greedy executions that run now (their curve rows with ``mean``);
+    greedy: their (weights (B, 7), pose seed) tasks; episode: the update these
+    rollouts feed (None: no update left, greedy executions only); samples:
+    (C, B, 7) weights drawn by the search; seeds: their pose seeds.
+    """
+
+    due: list
+    greedy: list
+    episode: int | None = None
+    samples: Any = None
+    seeds: list = dc.field(default_factory=list)
 
 
 class _Replay:
@@ -206,55 +174,6 @@ def _table_row(row: dict) -> str:
     return (f"{row['episode']:>7}  {'success' if row['greedy_success'] else 'failure':>7}  "
             f"{fmt(row['greedy_return'])}  {fmt(row.get('mean_return'))}  {fmt(row.get('best_return'))}  "
             f"{row['exploration']:8.4f}  {n_fail:>4}  {failures}")
-
-
-@dc.dataclass
-class RunState:
-    """A learning run between two batches: what ``checkpoint/`` saves and a resume loads.
-
-    search: the policy search (``search.npz``: its ``state_dict``, arrays
-      only; ``search.episode`` updates done, ``search.mean`` W: (B, 7)).
-    records: every record so far, in order (``results.jsonl``'s lines).
-    curve: the learning-curve rows so far, one per greedy execution run.
-    pending: greedy executions still to run, in episode order: each its
-      curve row without the greedy result, and ``mean``, the weights W
-      (B x 7, nested lists) it executes (its update's mean).
-    held_out_before: the held-out record before learning (None: off).
-    """
-
-    search: Any
-    records: list = dc.field(default_factory=list)
-    curve: list = dc.field(default_factory=list)
-    pending: list = dc.field(default_factory=list)
-    held_out_before: dict | None = None
-
-    def save(self, checkpoint: Path) -> None:
-        """``checkpoint/search.npz`` and ``checkpoint/state.json``, each written atomically."""
-        atomic_save_npz(checkpoint / "search.npz", {k: np.asarray(v) for k, v in self.search.state_dict().items()})
-        atomic_write_json(checkpoint / "state.json", {
-            "format": _CHECKPOINT_FORMAT, "episode": self.search.episode, "records": self.records,
-            "curve": self.curve, "held_out_before": self.held_out_before, "pending": self.pending})
-
-    @classmethod
-    def load(cls, checkpoint: Path) -> "RunState":
-        """The state :meth:`save` wrote (format 1: one pending greedy execution, of the current mean)."""
-        state = load_json(checkpoint / "state.json", _DAMAGED_RUN)
-        try:
-            search = policy_search_from_state(load_npz(checkpoint / "search.npz"))
-        except (KeyError, TypeError, IndexError, AttributeError) as e:   # arrays of another shape or kind
-            raise ValueError(f"{checkpoint / 'search.npz'}: damaged checkpoint ({type(e).__name__}: {e}); "
-                             f"{_DAMAGED_RUN}") from None
-        try:
-            pending = state.get("pending")
-            if state.get("format", 1) == 1:
-                pending = [] if pending is None else [{**pending, "mean": search.mean.tolist()}]
-            records, curve = state["records"], state["curve"]
-            if not (isinstance(records, list) and isinstance(curve, list) and isinstance(pending, list)):
-                raise TypeError("records, curve and pending must be lists")
-        except (KeyError, TypeError, AttributeError) as e:
-            raise ValueError(f"{checkpoint / 'state.json'}: damaged checkpoint ({type(e).__name__}: {e}); "
-                             f"{_DAMAGED_RUN}") from None
-        return cls(search, records, curve, pending, state.get("held_out_before"))
 
 
 class LearningRun:
@@ -343,7 +262,7 @@ class LearningRun:
         if not (self.checkpoint_dir / "state.json").is_file():
             raise FileNotFoundError(f"{self.checkpoint_dir}: no checkpoint to resume (state.json missing); "
                                     "run without --resume to start")
-        saved = load_json(self.out_dir / "config.json", _DAMAGED_RUN)
+        saved = load_json(self.out_dir / "config.json", DAMAGED_RUN)
         started_with = saved.pop("versions", None)
         if saved != self.run_config:
             changed = sorted(k for k in set(saved) | set(self.run_config) if saved.get(k) != self.run_config.get(k))
@@ -422,53 +341,97 @@ class LearningRun:
         return not self.state.pending and not self.rollouts_left
 
     def batch(self) -> bool:
-        """One batch: the next episode's C rollouts and its update (while updates remain), with the
-        pending greedy executions beside them once :data:`GREEDY_BATCH` are due (all, after the last
-        update). Returns whether it ran rollouts. Records, curve rows and the progress log follow;
+        """One batch: :meth:`ask`, :meth:`evaluate`, :meth:`tell`. Returns whether it ran rollouts;
         the checkpoint is :meth:`checkpoint`'s."""
+        batch = self.ask()
+        self.tell(batch, self.evaluate(batch))
+        return batch.episode is not None
+
+    def ask(self) -> "Batch":
+        """What runs next: the next episode's C samples and their pose seeds (while updates remain),
+        and the pending greedy executions once :data:`GREEDY_BATCH` are due (all, after the last update)."""
         config, state = self.config, self.state
         search = state.search
-        rollouts_now = self.rollouts_left
-        due = state.pending if (not rollouts_now or len(state.pending) >= GREEDY_BATCH) else []
-        tasks, greedy_results = [], []
-        for p in due:
-            g_seed, path = pose_seed(config.seed, p["episode"], None), self._greedy_path(p["episode"])
+        due = state.pending if (not self.rollouts_left or len(state.pending) >= GREEDY_BATCH) else []
+        greedy = [(np.asarray(p["mean"]), pose_seed(config.seed, p["episode"], None)) for p in due]
+        if not self.rollouts_left:
+            return Batch(due, greedy)
+        episode = search.episode + 1
+        self._exploration_at[episode] = exploration_size(search)
+        samples = search.ask(config.rollouts)
+        seeds = [pose_seed(config.seed, episode, c) for c in range(config.rollouts)]
+        return Batch(due, greedy, episode, samples, seeds)
+
+    def evaluate(self, batch: "Batch") -> list:
+        """The batch's executions, greedy ones first: those with a replay or the live view run on the
+        viewer, the rest beside the rollouts on the pool."""
+        viewed = {}
+        for k, (p, (weights, seed)) in enumerate(zip(batch.due, batch.greedy)):
+            path = self._greedy_path(p["episode"])
             if self._viewer is not None and (self._meshcat is not None or path is not None):
-                greedy_results.append(self._replayer.run(self._viewer, np.asarray(p["mean"]), g_seed, path))
-            else:
-                greedy_results.append(None)
-                tasks.append((np.asarray(p["mean"]), g_seed))
-        n_pooled = len(tasks)
-        if rollouts_now:
-            episode = search.episode + 1
-            self._exploration_at[episode] = exploration_size(search)
-            samples = search.ask(config.rollouts)
-            seeds = [pose_seed(config.seed, episode, c) for c in range(config.rollouts)]
-            tasks += list(zip(samples, seeds))
-        results = self._map(tasks, f"episode {search.episode + 1}/{config.episodes}" if rollouts_now else "greedy")
-        pooled, results = iter(results[:n_pooled]), results[n_pooled:]
-        for p, greedy_result in zip(due, greedy_results):
-            greedy_result = greedy_result if greedy_result is not None else next(pooled)
-            g = {"type": "greedy", "episode": p["episode"], **greedy_result.summary()}
+                viewed[k] = self._replayer.run(self._viewer, weights, seed, path)
+        tasks = [t for k, t in enumerate(batch.greedy) if k not in viewed]
+        if batch.episode is not None:
+            tasks += list(zip(batch.samples, batch.seeds))
+        desc = f"episode {batch.episode}/{self.config.episodes}" if batch.episode is not None else "greedy"
+        pooled = iter(self._map(tasks, desc))
+        greedy = [viewed[k] if k in viewed else next(pooled) for k in range(len(batch.greedy))]
+        return greedy + list(pooled)
+
+    def tell(self, batch: "Batch", results: list) -> None:
+        """Records the batch's results: each greedy execution's record and curve row (printed, logged),
+        then the rollouts' records, the search's update and the next pending greedy execution."""
+        config, state = self.config, self.state
+        n = len(batch.due)
+        for p, result in zip(batch.due, results[:n]):
+            g = {"type": "greedy", "episode": p["episode"], **result.summary()}
             state.records.append(g)
+            state.candidates[str(p["episode"])] = p["mean"]
             row = {**{k: v for k, v in p.items() if k != "mean"}, "greedy_success": g["success"],
                    "greedy_return": g["dense_return"], "greedy_verdict": g["verdict"]}
             state.curve.append(row)
             state.records.append({"type": "episode", **row})
             _print(_table_row(row), file=self.stream)
             self._log.row(row)
-        state.pending = state.pending[len(due):]
-        if rollouts_now:
-            search.tell(samples, episode_rewards(results, config.reward, config.method in PER_STEP_METHODS))
-            returns = episode_rewards(results, config.reward, False)
-            for c, r in enumerate(results):
-                state.records.append({"type": "rollout", "episode": episode, "index": c,
-                                      "reward": float(returns[c]), "exploration": self._exploration_at[episode],
-                                      **r.summary()})
-            if episode % int(config.greedy_every) == 0 or episode == config.episodes:
-                state.pending.append(_block_row(state.records, episode, int(config.greedy_every),
-                                                self._exploration_at, search.mean))
-        return rollouts_now
+        state.pending = state.pending[n:]
+        if batch.episode is None:
+            return
+        rollouts, episode, search = results[n:], batch.episode, state.search
+        search.tell(batch.samples, episode_rewards(rollouts, config.reward, config.method in PER_STEP_METHODS))
+        returns = episode_rewards(rollouts, config.reward, False)
+        for c, r in enumerate(rollouts):
+            state.records.append({"type": "rollout", "episode": episode, "index": c, "reward": float(returns[c]),
+                                  "exploration": self._exploration_at[episode], **r.summary()})
+        if episode % int(config.greedy_every) == 0 or episode == config.episodes:
+            state.pending.append(curve_row(state.records, episode, int(config.greedy_every),
+                                           self._exploration_at, search.mean))
+
+    def select(self) -> tuple[np.ndarray, dict]:
+        """The weights the run returns and the ``select`` record (docs/method.md 5.1,
+        :mod:`~drake_skill.learning.selection`): with ``select: last`` the final mean; guarded, the best of
+        the start, the best-scoring greedy mean and the final mean on ``select_poses`` shared poses,
+        judged by the learned verdict and return alone. Run after the last update."""
+        config, state = self.config, self.state
+        last = state.search.episode
+        if config.select == "last":
+            return state.search.mean, {"type": "select", "rule": "last", "episode": last}
+        means = {0: self.skill.initial_weights, last: state.search.mean}
+        best = selection.best_greedy_episode(r for r in state.records if r["type"] == "greedy")
+        if best is not None and str(best) in state.candidates:
+            means.setdefault(best, np.asarray(state.candidates[str(best)]))
+        seeds = [selection.select_seed(config.seed, k) for k in range(int(config.select_poses))]
+        episodes = sorted(means)
+        tasks = [(means[e], s) for e in episodes for s in seeds]
+        results = iter(self._map(tasks, "selection"))
+        candidates = [selection.Candidate(e, [next(results).summary() for _ in seeds]) for e in episodes]
+        chosen = selection.choose(candidates)
+        record = {"type": "select", "rule": "guarded", "episode": chosen.episode, "seeds": seeds,
+                  "candidates": [c.record() for c in candidates]}
+        state.records.append(record)
+        _print(f"selected the mean after update {chosen.episode} (" + ", ".join(
+            f"update {c.episode}: {c.score[0]}/{len(seeds)} verdicts, mean R {c.score[1]:.1f}" for c in candidates)
+            + ")", file=self.stream)
+        return means[chosen.episode], record
 
     def checkpoint(self) -> None:
         """Appends the new records to ``results.jsonl``, then saves the state to ``checkpoint/``."""
@@ -481,37 +444,46 @@ class LearningRun:
 
     # ------------------------------------------------------------------ the end
     def end(self) -> LearnOutcome:
-        """Held-out success after learning, the learned skill (``skill/``), ``learning_curve.png`` and
-        ``summary.json``."""
-        config, state, skill = self.config, self.state, self.skill
-        held_out_after = self._held_out("after")
+        """The selected policy (:meth:`select`), its held-out success, the learned skill (``skill/``),
+        ``learning_curve.png`` and ``summary.json``."""
+        config, state = self.config, self.state
+        weights, chosen = self.select()
+        held_out_after = self._held_out("after", weights)
         self._flush_records()
-        # The learned skill: the initial DMP's weights replaced by the final mean.
-        learned = dc.replace(skill, dmps=list(skill.dmps), info=dict(skill.info))
-        learned.dmps[skill.initial_index] = dc.replace(skill.initial_dmp, weights=state.search.mean)
-        learned.info["learning"] = {"method": config.method, "reward": config.reward,
-                                    "weighting": self.weighting, "episodes": config.episodes,
-                                    "rollouts": config.rollouts, "seed": config.seed,
-                                    "initial_skill": str(self.skill_dir.resolve())}
-        learned.save(self.out_dir / "skill", overwrite=True)
+        self._save_learned_skill(weights, chosen["episode"])
         plot_learning_curve(state.curve, self.out_dir / "learning_curve.png",
-                            title=f"{skill.name}: {config.method}, {config.reward} reward")
+                            title=f"{self.skill.name}: {config.method}, {config.reward} reward")
         curve = state.curve
         summary = {
-            "skill": skill.name, "method": config.method, "reward": config.reward, "weighting": self.weighting,
+            "skill": self.skill.name, "method": config.method, "reward": config.reward, "weighting": self.weighting,
             "episodes": config.episodes, "rollouts": config.rollouts, "seed": config.seed,
             "workers": self._pool.n_workers, "curve": curve,
             "greedy_success": [bool(c["greedy_success"]) for c in curve],
             "held_out_before": None if state.held_out_before is None else state.held_out_before["success_rate"],
             "held_out_after": None if held_out_after is None else held_out_after["success_rate"],
+            "select": config.select, "selected_episode": chosen["episode"],
             "failures": dict(sum((Counter(c["failures"]) for c in curve), Counter())),
             "n_rollouts": config.episodes * config.rollouts,
+            "n_executions": sum(1 for r in state.records if r["type"] in ("rollout", "greedy"))
+            + len(chosen.get("seeds", [])) * len(chosen.get("candidates", [])),
             "wall_s_this_call": round(time.perf_counter() - self._wall_start, 1),
             "artifacts": [a for a in (*ARTIFACTS, "tensorboard/")
                           if (self.out_dir / a.rstrip("/")).exists() or a == "summary.json"],
         }
         atomic_write_json(self.out_dir / "summary.json", summary)
-        return LearnOutcome(summary, self.out_dir, True, state.search)
+        return LearnOutcome(summary, self.out_dir, True, state.search, weights)
+
+    def _save_learned_skill(self, weights, episode: int) -> None:
+        """``skill/``: the initial DMP's weights replaced by ``weights`` (the mean after update ``episode``)."""
+        config, skill = self.config, self.skill
+        learned = dc.replace(skill, dmps=list(skill.dmps), info=dict(skill.info))
+        learned.dmps[skill.initial_index] = dc.replace(skill.initial_dmp, weights=np.asarray(weights))
+        learned.info["learning"] = {"method": config.method, "reward": config.reward,
+                                    "weighting": self.weighting, "episodes": config.episodes,
+                                    "rollouts": config.rollouts, "seed": config.seed, "select": config.select,
+                                    "selected_episode": int(episode),
+                                    "initial_skill": str(self.skill_dir.resolve())}
+        learned.save(self.out_dir / "skill", overwrite=True)
 
     def interrupted(self) -> LearnOutcome:
         """The outcome of a run stopped after a checkpoint (``resume`` continues it)."""
@@ -541,15 +513,17 @@ class LearningRun:
             return self.out_dir / "replay_last.html"
         return None
 
-    def _held_out(self, phase: str) -> dict | None:
-        """The greedy success of the current mean on the held-out poses, as a record (None: off)."""
+    def _held_out(self, phase: str, weights=None) -> dict | None:
+        """The greedy success of ``weights`` (default: the current mean) on the held-out poses, as a
+        record (None: off)."""
         config = self.config
         if config.held_out <= 0:
             return None
         seeds = [config.held_out_seed0 + i for i in range(config.held_out)]
         b = self._bar(len(seeds), f"held-out poses ({phase})")
         try:
-            report, _ = evaluate_greedy(self._pool, self.state.search.mean, seeds, lambda i, r: b.update(1))
+            weights = self.state.search.mean if weights is None else weights
+            report, _ = evaluate_greedy(self._pool, weights, seeds, lambda i, r: b.update(1))
         finally:
             b.close()
         record = {"type": "held_out", "phase": phase, "episode": self.state.search.episode, **report}
