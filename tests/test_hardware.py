@@ -199,6 +199,9 @@ def test_a_learning_run_on_the_simulated_robot(tmp_path, tmp_path_factory):
     records = [json.loads(line) for line in (tmp_path / "learn" / "results.jsonl").read_text().splitlines()]
     rollouts = [r for r in records if r.get("type") in ("rollout", "greedy")]
     assert len(rollouts) >= 4 and not any(r["failed"] for r in rollouts), rollouts
+    # The simulated robot publishes its ground truth (ground_truth_channel): the reward's quality is
+    # measured as in simulation (a real robot's runs, without it, get the reflex rate only).
+    assert "reward_auc" in outcome.summary and outcome.summary["reflex_rate"] == 0.0
     select = records[-1]         # the guarded selection ran the start and the last mean on the robot
     assert select["type"] == "select" and [len(c["executions"]) for c in select["candidates"]] == [1, 1]
     assert all(r["n_frames"] > 10 for r in rollouts)   # the learned reward saw the robot's camera

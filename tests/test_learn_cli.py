@@ -53,6 +53,10 @@ def test_learn_writes_every_artifact(learned, capsys):
     assert versions["git_commit"] == (head.stdout.strip() if head.returncode == 0 else None)
     assert versions["git_commit"] is None or len(versions["git_commit"]) == 40
     assert summary["n_rollouts"] == 2
+    # The learned reward's quality over the run's rollouts (issue 45; learning/reward_quality.py).
+    # Both rollouts tripped the reflex: nothing to rank, and the rate says so.
+    assert {k: summary[k] for k in ("reward_auc", "verdict_fpr", "verdict_fnr", "reflex_rate")} == {
+        "reward_auc": None, "verdict_fpr": None, "verdict_fnr": None, "reflex_rate": 1.0}
     records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
     # Seed 5: the greedy execution succeeds on its pose before learning and fails after
     # the one update (both rollouts failed). The guarded selection (docs/method.md 5.1) sees it

@@ -150,6 +150,13 @@ def test_resume_after_an_interruption_reproduces_the_uninterrupted_run(tmp_path_
     # The guarded selection (docs/method.md 5.1) ran the start, the best greedy mean (update 1: the
     # highest greedy return, 150.7) and the last on 3 shared poses and kept update 1: 3 of 3 verdicts
     # like the start, and the higher mean return.
+    # summary.json's reward quality is that of the run's own rollouts (learning/reward_quality.py).
+    from drake_skill.learning.reward_quality import reward_quality
+
+    quality = reward_quality([r for r in lines["whole"] if r["type"] == "rollout"], load_skill("close").success)
+    assert {k: whole.summary[k] for k in ("reward_auc", "verdict_fpr", "verdict_fnr")} == {
+        k: quality[k] for k in ("reward_auc", "verdict_fpr", "verdict_fnr")}
+    assert whole.summary["reflex_rate"] == 0.0 and (tmp_path / "whole" / "return_vs_state.png").is_file()
     select = [r for r in lines["whole"] if r["type"] == "select"]
     assert len(select) == 1 and select[0]["episode"] == 1 == whole.summary["selected_episode"]
     scores = [(c["episode"], c["verdict_successes"], round(c["mean_return"], 1)) for c in select[0]["candidates"]]

@@ -87,7 +87,8 @@ __all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "REWARDS", "LearnConfig", "LearnOutcom
 
 #: What a learning run writes into its output directory (and ``tensorboard/`` where the
 #: ``tensorboard`` package is installed).
-ARTIFACTS = ("config.json", "results.jsonl", "progress.csv", "summary.json", "learning_curve.png", "skill/",
+ARTIFACTS = ("config.json", "results.jsonl", "progress.csv", "summary.json", "learning_curve.png",
+             "return_vs_state.png", "skill/",
              "replay_first.html", "replay_last.html", "checkpoint/")
 
 
@@ -461,7 +462,7 @@ class LearningRun:
             "greedy_success": [bool(c["greedy_success"]) for c in curve],
             "held_out_before": None if state.held_out_before is None else state.held_out_before["success_rate"],
             "held_out_after": None if held_out_after is None else held_out_after["success_rate"],
-            "select": config.select, "selected_episode": chosen["episode"],
+            "select": config.select, "selected_episode": chosen["episode"], **self._reward_quality(),
             "failures": dict(sum((Counter(c["failures"]) for c in curve), Counter())),
             "n_rollouts": config.episodes * config.rollouts,
             "n_executions": sum(1 for r in state.records if r["type"] in ("rollout", "greedy"))
@@ -472,6 +473,23 @@ class LearningRun:
         }
         atomic_write_json(self.out_dir / "summary.json", summary)
         return LearnOutcome(summary, self.out_dir, True, state.search, weights)
+
+    def _reward_quality(self) -> dict:
+        """``reward_auc``, ``verdict_fpr``, ``verdict_fnr`` (:func:`~drake_skill.learning.reward_quality.
+        reward_quality`) and ``reflex_rate`` over the run's rollouts, and ``return_vs_state.png``; on the
+        robot, where no execution has a ground-truth object state (NaN), only ``reflex_rate``."""
+        from drake_skill.learning.reward_quality import plot_return_vs_state, reward_quality
+
+        rollouts = [r for r in self.state.records if r["type"] == "rollout"]
+        reflex = {"reflex_rate": sum(r["reason"] == "reflex" for r in rollouts) / max(len(rollouts), 1)}
+        executions = (r for r in self.state.records if r["type"] in ("rollout", "greedy"))
+        if not any(r.get("final_object_state") is not None for r in executions):
+            return reflex
+        rule = self.skill.spec.success
+        quality = reward_quality(rollouts, rule)
+        plot_return_vs_state(rollouts, rule, self.out_dir / "return_vs_state.png",
+                             title=f"{self.skill.name}: learned return of the run's rollouts")
+        return {**{k: quality[k] for k in ("reward_auc", "verdict_fpr", "verdict_fnr")}, **reflex}
 
     def _save_learned_skill(self, weights, episode: int) -> None:
         """``skill/``: the initial DMP's weights replaced by ``weights`` (the mean after update ``episode``)."""
