@@ -5,6 +5,8 @@
                                [--held-out 10] [--seed0 0] [--workers N] [--ray | --ray-address ADDR]
                                [--out results/experiment]
     drake-skill experiment report OUT [--table FILE] [--report-dir DIR]
+    drake-skill experiment generalization [--skills ...] [--runs 5] [--workers N]
+                                          [--out docs/results/generalization]
 
 ``run``: for each skill the scripted demonstrations are recorded and the
 skill fitted once (``OUT/SKILL/initial_skill``, reused when there); its
@@ -28,6 +30,14 @@ rollouts_used, success, return, held_out_after, held_out_before).
 episode), ``SKILL_dense.png`` (every method, dense reward) and
 ``results.md`` (success per episode, area under the curve, the thesis's
 three claims marked holds / does not hold / cannot tell with their numbers).
+
+``generalization``: every shipped skill (or --skills) learned with
+``drake-skill learn``'s defaults (PI^2-ES-Cov, dense reward, 5 x 6 rollouts,
+tolerance fit, guarded selection, 10 held-out poses), --runs seeds each, as
+a grid (resumable the same way); then, from the stored runs alone,
+``table.csv`` (a row per skill and seed), ``summary.json``, per skill
+``SKILL_held_out.png`` and ``SKILL_return_vs_state.png``, and ``README.md``
+with the criteria of issue 45 marked (drake_skill.experiments.generalization).
 """
 
 from __future__ import annotations
@@ -56,6 +66,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     report_p.add_argument("out", type=Path, help="the grid folder (holding table.csv)")
     report_p.add_argument("--table", type=Path, default=None, help="the table (default OUT/table.csv)")
     report_p.add_argument("--report-dir", type=Path, default=None, help="where to write (default OUT)")
+    general = actions.add_parser(
+        "generalization", help="every skill learned with learn's defaults, N seeds each (resumable), and its report",
+        description="Learning on every skill with drake-skill learn's defaults; see 'drake-skill experiment --help'.")
+    general.add_argument("--skills", nargs="+", default=None, metavar="SKILL",
+                         help="shipped skills' names or skill files (default: every shipped skill)")
+    general.add_argument("--runs", type=int, default=5, help="seeds per skill (default 5)")
+    general.add_argument("--workers", type=int, default=None, help="runs at a time (default: one per CPU)")
+    general.add_argument("--out", type=Path, default=Path("docs") / "results" / "generalization",
+                         help="the study's folder (default docs/results/generalization)")
+    general.add_argument("--report-only", action="store_true", help="rewrite the report from the stored runs only")
+    general.add_argument("--quiet", action="store_true", help="no progress bar")
     for action in actions.choices.values():      # 'experiment run --verbose' as 'experiment --verbose run'
         action.add_argument("--verbose", action="store_true", default=argparse.SUPPRESS,
                             help="print tracebacks of errors and every differential-IK warning")
@@ -140,7 +161,31 @@ def _report(args) -> int:
     return 0
 
 
+def _generalization(args) -> int:
+    from drake_skill.cli import errors
+    from drake_skill.experiments.generalization import generalization_config, write_report
+    from drake_skill.experiments.grid import run_grid
+    from drake_skill.learning.rollout import RolloutConfig
+
+    errors.output_folder(args.out, "--out", what="the generalization study")
+    failed = []
+    if not args.report_only:
+        config = generalization_config(args.skills, args.runs)
+        outcome = run_grid(args.out, config, rollout_config=RolloutConfig(), workers=args.workers,
+                           progress=not args.quiet, quiet=args.quiet)
+        print(f"{outcome.ran} run(s) finished in {outcome.wall_s:.0f} s on {outcome.workers} worker(s); "
+              f"{outcome.stored} stored in {args.out}")
+        failed = outcome.failed
+        for name, error in failed:
+            print(f"not finished: {name}: {error}")
+    written = write_report(args.out)
+    print(f"wrote {', '.join(str(p) for p in written)}")
+    return 1 if failed else 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.action == "generalization":
+        return _generalization(args)
     return _run(args) if args.action == "run" else _report(args)
 
 

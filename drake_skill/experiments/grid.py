@@ -100,6 +100,10 @@ class GridConfig:
       default: the committed chapter-7 grid's fit, so a resumed grid never
       mixes fits) or "tolerance" (docs/method.md section 2.2). Stored in
       ``grid.json`` when not "thesis" (grids stored before it have none).
+    select: which policy each run returns (``LearnConfig.select``): "last"
+      (the default: the thesis's final mean, the chapter-7 grid) or
+      "guarded" (``drake-skill learn``'s default, docs/method.md 5.1; the
+      generalization study). Stored in ``grid.json`` when not "last".
     """
 
     skills: tuple[str, ...] = ("open", "close")
@@ -113,6 +117,7 @@ class GridConfig:
     seed0: int = 0
     keep_skills: bool = False
     fit: str = "thesis"
+    select: str = "last"
     sources: dict[str, str] = dc.field(default_factory=dict)
 
     def validate(self) -> "GridConfig":
@@ -125,6 +130,8 @@ class GridConfig:
                                    ("--rollouts", self.rollouts, 1), ("--held-out", self.held_out, 0)):
             if int(value) < least:
                 raise ValueError(f"{flag} {value}: expected at least {least}; give {flag} {max(least, 1)} or more")
+        if self.select not in ("last", "guarded"):
+            raise ValueError(f"--select {self.select}: unknown rule; give last or guarded")
         if self.fit not in ("thesis", "tolerance"):
             raise ValueError(f"--fit {self.fit}: unknown fit; give thesis or tolerance")
         if "cma-es" in self.methods and int(self.rollouts) < 2:
@@ -139,19 +146,20 @@ class GridConfig:
         return int(self.episodes), int(self.rollouts)
 
     def learn_config(self, method: str, reward: str, run: int) -> LearnConfig:
-        """``learn``'s settings of run ``run`` of a cell (held-out off: the grid measures it; the final
-        mean returned, as the thesis's chapter 7 does)."""
+        """``learn``'s settings of run ``run`` of a cell (held-out off: the grid measures it on the policy
+        the run returns: by default the final mean, as the thesis's chapter 7 does)."""
         episodes, rollouts = self.budget(method)
         every = int(self.rollouts) if method == "power" else 1
         return LearnConfig(method=method, reward=reward, episodes=episodes, rollouts=rollouts,
                            seed=int(self.seed0) + int(run), held_out=0, greedy_every=every,
-                           select="last").validate()
+                           select=self.select).validate()
 
     def settings(self) -> dict[str, Any]:
         """What decides the numbers of a run beyond its cell (kept in ``grid.json``)."""
         fit = {} if self.fit == "thesis" else {"fit": self.fit}
+        select = {} if self.select == "last" else {"select": self.select}
         return {"episodes": int(self.episodes), "rollouts": int(self.rollouts), "held_out": int(self.held_out),
-                "held_out_seed0": int(self.held_out_seed0), "seed0": int(self.seed0), **fit}
+                "held_out_seed0": int(self.held_out_seed0), "seed0": int(self.seed0), **fit, **select}
 
 
 def run_dir(out, skill: str, method: str, reward: str, run: int) -> Path:
@@ -203,7 +211,8 @@ class GridTask:
             return self.held_out
         episodes, rollouts = int(self.learn["episodes"]), int(self.learn["rollouts"])
         greedy = -(-episodes // int(self.learn.get("greedy_every", 1))) + 1
-        return episodes * rollouts + greedy + self.held_out
+        select = 2 * int(self.learn.get("select_poses", 3)) if self.learn.get("select") == "guarded" else 0
+        return episodes * rollouts + greedy + select + self.held_out
 
 
 # ----------------------------------------------------------------------- in a worker
@@ -262,7 +271,7 @@ def _execute_run(task: GridTask) -> dict:
         outcome = learn(task.spec.skill_dir, partial, LearnConfig(**task.learn), station_config=runner.config,
                         rollout_config=RolloutConfig(**task.spec.rollout), resume=resume, force=not resume,
                         replay=False, progress=False, log=log, runner=runner)
-    held = _held_out(runner, outcome.search.mean, task.held_out, task.held_out_seed0)
+    held = _held_out(runner, outcome.weights, task.held_out, task.held_out_seed0)
     if not task.keep_skill:
         shutil.rmtree(partial / "skill", ignore_errors=True)
     summary = {**outcome.summary, "run": task.run, "resumed": resume,
