@@ -298,3 +298,37 @@ def test_a_run_that_makes_the_skill_worse_returns_the_start(tmp_path_factory, tm
     assert (start["verdict_successes"], start["mean_return"]) > (last["verdict_successes"], last["mean_return"])
     with pytest.raises(ValueError, match="select"):
         LearnConfig(select="best").validate()
+
+
+def test_span_exploration_maps_blends_of_the_demonstrations_and_their_covariance():
+    from drake_skill.learning.exploration import SpanExploration
+
+    w0, w1, w2 = np.zeros((4, 7)), np.arange(28.0).reshape(4, 7), np.ones((4, 7))
+    span = SpanExploration(w0, [w1, w2], ridge=0.0)
+    np.testing.assert_array_equal(span.weights([[1.0, 0.0]]), w1)            # the unit vectors: the demos
+    np.testing.assert_array_equal(span.weights([[0.5, 2.0]]), 0.5 * w1 + 2.0 * w2)
+    batch = span.weights(np.array([[[1.0, 0.0]], [[0.0, -1.0]]]))
+    assert batch.shape == (2, 4, 7) and np.array_equal(batch[1], -w2)
+    # The demonstrations' coordinates 0, e1, e2: variances 1/3, covariance -1/6 (ddof 1).
+    np.testing.assert_allclose(span.initial_covariance(), [[[1 / 3, -1 / 6], [-1 / 6, 1 / 3]]])
+    with pytest.raises(ValueError, match="at least 2 demonstrations"):
+        SpanExploration(w0, [])
+    with pytest.raises(ValueError, match="exploration"):
+        LearnConfig(exploration="wide").validate()
+
+
+def test_a_run_exploring_the_span_returns_a_blend_of_the_demonstrations(tmp_path_factory, tmp_path):
+    """``exploration: span`` (docs/method.md 5.2): every sample, and so the learned mean, lies on the line
+    through the two Close demonstrations' weights; the scale defaults to 1."""
+    shared = shared_skill(tmp_path_factory)
+    skill = Skill.load(shared["skill_dir"])
+    config = LearnConfig(episodes=1, rollouts=2, held_out=0, seed=1, exploration="span", select="last")
+    outcome = learn(shared["skill_dir"], tmp_path / "run", config, station_config=shared["station"],
+                    rollout_config=rollout_config(), replay=False, progress=False, log=io.StringIO())
+    assert outcome.search.mean.shape == (1, 1)            # theta: one coordinate for two demonstrations
+    other = skill.dmps[1 - skill.initial_index].weights
+    theta = float(outcome.search.mean[0, 0])
+    assert theta != 0.0
+    np.testing.assert_allclose(outcome.weights, skill.initial_weights + theta * (other - skill.initial_weights))
+    np.testing.assert_array_equal(Skill.load(tmp_path / "run" / "skill").initial_weights, outcome.weights)
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["learn"]["exploration_scale"] == 1.0

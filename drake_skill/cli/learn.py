@@ -89,6 +89,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "greedy mean and the last on --select-poses shared poses and keeps the best by the "
                              "learned verdict and return (never the ground truth; docs/method.md 5.1); last: "
                              "the final mean, as the thesis does")
+    search.add_argument("--exploration", choices=("basis", "span"), default=None,
+                        help="what the search varies: basis (thesis Eq. 5.3, default: every basis's weights from "
+                             "Sigma_0) or span (blends and extrapolations of the demonstrations' DMPs; "
+                             "docs/method.md 5.2)")
     search.add_argument("--select-poses", type=int, default=None, metavar="N",
                         help="object poses each guarded candidate runs on (default 3)")
     run = parser.add_argument_group("run")
@@ -132,7 +136,7 @@ def _station_config(args, skill):
 
 _FILE_FLAGS = ("skill", "skill_dir", "demos", "out")
 _LEARN_FLAGS = ("method", "reward", "weighting", "episodes", "rollouts", "seed", "held_out", "exploration_scale",
-                "select", "select_poses")
+                "select", "select_poses", "exploration")
 
 
 def _apply_config_file(args) -> None:
@@ -233,7 +237,7 @@ def run(args: argparse.Namespace) -> int:
     config = LearnConfig(method=args.method, reward=args.reward, weighting=args.weighting or "",
                          episodes=args.episodes, rollouts=args.rollouts, seed=args.seed,
                          held_out=args.held_out, exploration_scale=args.exploration_scale,
-                         select=args.select, select_poses=args.select_poses)
+                         select=args.select, select_poses=args.select_poses, exploration=args.exploration)
     rollout = options.rollout_config(args)
     meshcat = None
     if args.meshcat:

@@ -12,6 +12,7 @@ from typing import Any
 
 from drake_skill import configs
 from drake_skill.learning.policy_search import METHODS
+from drake_skill.learning.exploration import EXPLORATIONS
 from drake_skill.learning.selection import SELECT_RULES
 
 __all__ = ["LearnConfig", "REWARDS"]
@@ -57,6 +58,11 @@ class LearnConfig:
       learned verdict and return on ``select_poses`` shared poses) or "last"
       (the thesis's final mean; the chapter-7 grid).
     select_poses: object poses each guarded candidate runs on (>= 1).
+    exploration: what the search varies (docs/method.md 5.2,
+      :mod:`~drake_skill.learning.exploration`): "basis" (thesis Eq. 5.3:
+      every basis's weights around the mean, from Sigma_b^0) or "span" (blends
+      and extrapolations of the demonstrations' DMPs; ``exploration_scale``
+      then defaults to 1).
     """
 
     method: str = "pi2-es-cov"
@@ -71,6 +77,7 @@ class LearnConfig:
     greedy_every: int = 1
     select: str = "guarded"
     select_poses: int = 3
+    exploration: str = "basis"
 
     def validate(self) -> "LearnConfig":
         bad = functools.partial(configs.bad, "learn config")
@@ -92,6 +99,8 @@ class LearnConfig:
             bad("greedy_every", self.greedy_every, "at least 1 (a greedy execution after every n-th update)")
         if self.select not in SELECT_RULES:
             bad("select", self.select, "'guarded' (never return a policy that scores below the start) or 'last'")
+        if self.exploration not in EXPLORATIONS:
+            bad("exploration", self.exploration, "'basis' (thesis Eq. 5.3) or 'span' (the demonstrations' span)")
         if int(self.select_poses) < 1:
             bad("select_poses", self.select_poses, "at least 1 object pose per candidate")
         if int(self.held_out) < 0:

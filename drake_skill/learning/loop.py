@@ -76,6 +76,7 @@ from drake_skill.fileio import atomic_write_json, atomic_write_text, load_json
 from drake_skill.learning import selection
 from drake_skill.learning.config import REWARDS, LearnConfig
 from drake_skill.learning.evaluation import HELD_OUT_SEED0, evaluate_greedy
+from drake_skill.learning.exploration import SpanExploration
 from drake_skill.learning.plots import plot_learning_curve
 from drake_skill.learning.policy_search import PER_STEP_METHODS, make_policy_search
 from drake_skill.learning.runlog import RunLog, software_versions
@@ -207,8 +208,11 @@ class LearningRun:
         config = (config or LearnConfig()).validate()
         self.skill_dir, self.out_dir = Path(skill_dir), Path(out_dir)
         self.skill = Skill.load(self.skill_dir)
-        if config.exploration_scale is None:
-            config = dc.replace(config, exploration_scale=float(self.skill.spec.exploration_scale))
+        if config.exploration_scale is None:       # span: sigma_0 = 1 on the demonstrations' own covariance
+            scale = 1.0 if config.exploration == "span" else float(self.skill.spec.exploration_scale)
+            config = dc.replace(config, exploration_scale=scale)
+        #: The span the search runs in (``exploration: span``, docs/method.md 5.2); None: the weights W.
+        self.span = SpanExploration.of_skill(self.skill) if config.exploration == "span" else None
         self.config = config
         self.station_config = station_config if station_config is not None else self.skill.station_config()
         self.rollout_config = (rollout_config or RolloutConfig()).validate()
@@ -240,8 +244,12 @@ class LearningRun:
             (self.out_dir / name).unlink(missing_ok=True)
         atomic_write_json(self.out_dir / "config.json", {**self.run_config, "versions": software_versions()})
         config = self.config
-        search = make_policy_search(config.method, self.skill.initial_weights,
-                                    config.exploration_scale * self.skill.sigma0, **config.search_options())
+        if self.span is not None:
+            start, covariance = self.span.origin_theta(), self.span.initial_covariance()
+        else:
+            start, covariance = self.skill.initial_weights, self.skill.sigma0
+        search = make_policy_search(config.method, start, config.exploration_scale * covariance,
+                                    **config.search_options())
         self.state = RunState(search)
         self._open()
         self._log.start([], [], fresh=True)
@@ -249,7 +257,7 @@ class LearningRun:
         # Episode 0: the greedy execution before learning is still to run.
         self.state.pending = [{"episode": 0, "mean_return": None, "best_return": None,
                                "exploration": exploration_size(search), "failures": {},
-                               "mean": search.mean.tolist()}]
+                               "mean": self.weights_of(search.mean).tolist()}]
         self.checkpoint()
         _print(f"{self.skill.name}: {config.method}, {config.reward} reward, weighting {self.weighting or '-'}, "
                f"{config.episodes} episodes x {config.rollouts} rollouts, {self._pool.n_workers} worker(s)",
@@ -325,6 +333,14 @@ class LearningRun:
         self.close()
 
     # ------------------------------------------------------------------ the batches
+    def weights_of(self, point) -> np.ndarray:
+        """The DMP weights W (B, 7) of a point of the search (a batch (S, ...) -> (S, B, 7)): the point
+        itself, or with ``exploration: span`` its image W_0 + sum_d theta_d (W_d - W_0)."""
+        point = np.asarray(point)
+        if self.span is None:
+            return point
+        return self.span.weights(point)
+
     @property
     def weighting(self) -> str | None:
         """The rollout weighting the search uses (the method's default when not given; None: none)."""
@@ -373,7 +389,7 @@ class LearningRun:
                 viewed[k] = self._replayer.run(self._viewer, weights, seed, path)
         tasks = [t for k, t in enumerate(batch.greedy) if k not in viewed]
         if batch.episode is not None:
-            tasks += list(zip(batch.samples, batch.seeds))
+            tasks += list(zip(self.weights_of(batch.samples), batch.seeds))
         desc = f"episode {batch.episode}/{self.config.episodes}" if batch.episode is not None else "greedy"
         pooled = iter(self._map(tasks, desc))
         greedy = [viewed[k] if k in viewed else next(pooled) for k in range(len(batch.greedy))]
@@ -405,7 +421,7 @@ class LearningRun:
                                   "exploration": self._exploration_at[episode], **r.summary()})
         if episode % int(config.greedy_every) == 0 or episode == config.episodes:
             state.pending.append(curve_row(state.records, episode, int(config.greedy_every),
-                                           self._exploration_at, search.mean))
+                                           self._exploration_at, self.weights_of(search.mean)))
 
     def select(self) -> tuple[np.ndarray, dict]:
         """The weights the run returns and the ``select`` record (docs/method.md 5.1,
@@ -415,8 +431,8 @@ class LearningRun:
         config, state = self.config, self.state
         last = state.search.episode
         if config.select == "last":
-            return state.search.mean, {"type": "select", "rule": "last", "episode": last}
-        means = {0: self.skill.initial_weights, last: state.search.mean}
+            return self.weights_of(state.search.mean), {"type": "select", "rule": "last", "episode": last}
+        means = {0: self.skill.initial_weights, last: self.weights_of(state.search.mean)}
         best = selection.best_greedy_episode(r for r in state.records if r["type"] == "greedy")
         if best is not None and str(best) in state.candidates:
             means.setdefault(best, np.asarray(state.candidates[str(best)]))
@@ -540,7 +556,7 @@ class LearningRun:
         seeds = [config.held_out_seed0 + i for i in range(config.held_out)]
         b = self._bar(len(seeds), f"held-out poses ({phase})")
         try:
-            weights = self.state.search.mean if weights is None else weights
+            weights = self.weights_of(self.state.search.mean) if weights is None else weights
             report, _ = evaluate_greedy(self._pool, weights, seeds, lambda i, r: b.update(1))
         finally:
             b.close()
