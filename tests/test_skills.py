@@ -33,7 +33,7 @@ def _write(tmp_path, name="push", scenario="drawer", joint="drawer_slide", rule=
 
 #: The shipped skills by name: the thesis's three, Slide, and the new kinds of object
 #: (docs/skills.md "The shipped skills").
-SHIPPED = ["close", "draw", "open", "press", "push", "slide", "swing", "tilt"]
+SHIPPED = ["close", "draw", "open", "press", "push", "slide", "swing", "tilt", "turn"]
 
 
 def test_the_shipped_skills_are_data_files():
