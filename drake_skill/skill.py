@@ -565,6 +565,26 @@ def gripper_opening(demos: Sequence) -> float:
     return float(np.clip(np.median(per_demo), 0.0, 2 * FINGER_MAX))
 
 
+def check_demonstrations_meet_rule(demos: Sequence, spec) -> None:
+    """Raises a one-line ValueError when no demonstration meets the skill's success rule: the goal
+    model would learn, as the goal, an end the rule calls a failure (docs/skills.md). Demonstrations
+    without a ground-truth final state (on the robot: NaN, or none) are not judged."""
+    from drake_skill.station.success import judge_success
+
+    rule = getattr(spec, "success", None)
+    if rule is None or not getattr(rule, "joint", "") or not len(demos):
+        return
+    finals = [float(getattr(d, "final_object_state", float("nan")) or float("nan")) for d in demos]
+    if not all(np.isfinite(finals)) or any(judge_success(v, rule) for v in finals):
+        return
+    side = f">= {rule.above:g}" if rule.above is not None else f"<= {rule.below:g}"
+    names = ", ".join(str(getattr(d, "path", None) or f"demos[{i}]") for i, d in enumerate(demos))
+    ends = ", ".join(f"{v:.4g}" for v in finals)
+    raise ValueError(f"{names}: no demonstration meets the skill's success rule ({rule.joint} {side}; they end "
+                     f"at {ends}): demonstrate the skill further, or correct 'success' in the skill file "
+                     f"'{spec.name}' to what the demonstrations show")
+
+
 def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
     """Fits a skill from demonstrations (objects with ``times``, ``X_OE``,
     ``object_points``, ``perception_valid``, e.g. ``drake_skill.demos.format.Demonstration``).
@@ -593,6 +613,7 @@ def fit_skill(demos: Sequence, config: SkillConfig | None = None) -> Skill:
                              f"(pomrp.goal_model.n_states_min = {k_min}); record a longer demonstration "
                              "or lower n_states_min")
 
+    check_demonstrations_meet_rule(demos, config.spec)
     fit, config, dmp_fit = _fit_action(demos, config)
 
     from drake_skill.perception.pcae import load_pcae

@@ -75,3 +75,24 @@ def test_the_study_runs_learns_defaults_on_every_shipped_skill(capsys):
     assert config.settings()["select"] == "guarded"
     assert main(["experiment", "generalization", "--out", "/dev/null/x", "--report-only"]) == 2
     assert "--out" in capsys.readouterr().err
+
+
+def test_fit_refuses_demonstrations_that_never_meet_the_skills_rule(tmp_path_factory, tmp_path, capsys):
+    """A skill file whose rule the demonstrations never meet: one line naming the files, the rule and
+    the fix, before anything is fitted or written."""
+    from learning_support import shared_skill
+
+    from drake_skill.skills.spec import SKILL_DIR
+
+    shared = shared_skill(tmp_path_factory)
+    text = (SKILL_DIR / "close.yaml").read_text().replace("below: 0.05", "below: -0.5")
+    assert "below: -0.5" in text
+    skill_file = tmp_path / "close.yaml"
+    skill_file.write_text(text)
+    out = tmp_path / "fitted"
+    assert main(["fit", "--demos", str(shared["demos_dir"]), "--skill", str(skill_file), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "demo_000.npz" in err and "demo_001.npz" in err
+    assert "no demonstration meets the skill's success rule (lid_hinge <= -0.5; they end at" in err
+    assert err.endswith("or correct 'success' in the skill file 'close' to what the demonstrations show")
+    assert not out.exists()
