@@ -100,7 +100,7 @@ def _skill_figures(out: Path, skill: str, runs, rule) -> dict:
              "reflex_rate": sum(r["reason"] == "reflex" for r in rollouts) / max(len(rollouts), 1),
              "rollouts": len(rollouts), "seeds": [int(s["seed"]) for _, s in runs]}
     plot_return_vs_state(rollouts, rule, out / f"{skill}_return_vs_state.png",
-                         title=f"{skill}: learned return of every rollout, {len(runs)} runs")
+                         title=f"{skill}: learned return of every rollout, {len(runs)} run{'' if len(runs) == 1 else 's'}")
     _plot_held_out(entry, out / f"{skill}_held_out.png", skill)
     return entry
 
