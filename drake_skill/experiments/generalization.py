@@ -99,8 +99,9 @@ def _skill_figures(out: Path, skill: str, runs, rule) -> dict:
              "held_out_after": [s.get("held_out_after") for _, s in runs],
              "reflex_rate": sum(r["reason"] == "reflex" for r in rollouts) / max(len(rollouts), 1),
              "rollouts": len(rollouts), "seeds": [int(s["seed"]) for _, s in runs]}
+    runs_text = f"{len(runs)} run" + ("" if len(runs) == 1 else "s")
     plot_return_vs_state(rollouts, rule, out / f"{skill}_return_vs_state.png",
-                         title=f"{skill}: learned return of every rollout, {len(runs)} run{'' if len(runs) == 1 else 's'}")
+                         title=f"{skill}: learned return of every rollout, {runs_text}")
     _plot_held_out(entry, out / f"{skill}_held_out.png", skill)
     return entry
 
