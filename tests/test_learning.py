@@ -176,7 +176,7 @@ def test_resume_after_an_interruption_reproduces_the_uninterrupted_run(tmp_path_
 def test_greedy_every_runs_greedy_executions_after_every_nth_update_and_the_last(tmp_path_factory, tmp_path):
     """PoWER's thesis budget: 30 updates of 1 rollout, a greedy execution every 6 (here 3 updates, every 2)."""
     shared = shared_skill(tmp_path_factory)
-    config = LearnConfig(method="power", episodes=3, rollouts=1, held_out=0, seed=5, greedy_every=2)
+    config = LearnConfig(method="power", episodes=3, rollouts=1, held_out=0, seed=5, greedy_every=2, select="last")
     outcome = learn(shared["skill_dir"], tmp_path / "run", config, station_config=shared["station"],
                     rollout_config=rollout_config(), replay=False, progress=False)
     curve = outcome.summary["curve"]
