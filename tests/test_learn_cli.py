@@ -29,7 +29,8 @@ def learned(tmp_path_factory):
     shared = shared_skill(tmp_path_factory)
     out = tmp_path_factory.mktemp("learn_cli") / "run"
     argv = ["learn", "--skill-dir", str(shared["skill_dir"]), "--station-config", str(shared["station_yaml"]),
-            "--episodes", "1", "--rollouts", "2", "--held-out", "2", "--seed", "5", "--out", str(out), "--quiet"]
+            "--episodes", "1", "--rollouts", "2", "--held-out", "2", "--seed", "5", "--select-poses", "1",
+            "--out", str(out), "--quiet"]
     assert main(argv) == 0
     return shared, out, argv
 
@@ -72,9 +73,8 @@ def test_learn_writes_every_artifact(learned, capsys):
     assert [r["type"] for r in records] == ["held_out", "rollout", "rollout", "greedy", "episode", "greedy",
                                            "episode", "select", "held_out"]
     select = records[-2]
-    # Two of three verdicts each: the start's higher mean learned return decides.
-    assert [(c["episode"], c["verdict_successes"]) for c in select["candidates"]] == [(0, 2), (1, 2)]
-    assert select["candidates"][0]["mean_return"] > select["candidates"][1]["mean_return"]
+    # On the selection pose the verdict calls the start a success and the last mean a failure.
+    assert [(c["episode"], c["verdict_successes"]) for c in select["candidates"]] == [(0, 1), (1, 0)]
     assert [r["episode"] for r in records if r["type"] == "episode"] == [0, 1]
     # progress.csv: the curve's rows (greedy success True, False, as above).
     rows = read_progress(out / "progress.csv")
@@ -214,13 +214,15 @@ def test_learn_config_file_flags_override_it_and_print_config_shows_the_effect(t
 
 
 def test_a_learn_run_from_a_config_file_equals_the_same_run_from_flags(learned, tmp_path):
-    """learned's run (flags: --skill-dir, --station-config, --episodes 1 --rollouts 2 --held-out 2 --seed 5)
+    """learned's run (flags: --skill-dir, --station-config, --episodes 1 --rollouts 2 --held-out 2 --seed 5
+    --select-poses 1)
     again from one --config file holding the same settings and the station: the same numbers."""
     shared, out, _ = learned
     station = "".join(f"  {line}\n" for line in shared["station_yaml"].read_text().splitlines())
     config = tmp_path / "run.yaml"
     config.write_text(f"skill_dir: {shared['skill_dir']}\nout: {tmp_path / 'run'}\n"
-                      "learn: {episodes: 1, rollouts: 2, held_out: 2, seed: 5}\n" f"station:\n{station}")
+                      "learn: {episodes: 1, rollouts: 2, held_out: 2, seed: 5, select_poses: 1}\n"
+                      f"station:\n{station}")
     assert main(["learn", "--config", str(config), "--quiet", "--no-replay"]) == 0
 
     def numbers(folder):
