@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from drake_skill.experiments.table import held_out_before
 from drake_skill.fileio import atomic_write_json, atomic_write_text, load_json
 
 __all__ = ["COLUMNS", "CRITERIA", "DEFAULT_OUT", "generalization_config", "run_rows", "write_report"]
@@ -60,24 +61,22 @@ def _rollouts(run_folder: Path) -> list[dict]:
 
 
 def _runs(out: Path) -> dict[str, list[tuple[Path, dict]]]:
-    """{skill: [(run folder, summary.json)] in seed order} of the stored runs."""
+    """{skill: [(run folder, summary.json)] in seed order} of the study's stored runs."""
+    from drake_skill.experiments.grid import run_dir
+    from drake_skill.experiments.table import stored_runs
+
     runs: dict[str, list] = {}
-    for p in sorted(Path(out).glob(f"*/{METHOD}/{REWARD}/run_*/summary.json")):
-        summary = load_json(p, f"delete that run's folder ({p.parent}); the command redoes it")
-        runs.setdefault(summary["skill"], []).append((p.parent, summary))
+    for s in stored_runs(out):
+        if (s["method"], s["reward"]) == (METHOD, REWARD):
+            runs.setdefault(s["skill"], []).append((run_dir(out, s["skill"], METHOD, REWARD, s["run"]), s))
     return runs
-
-
-def _before(out: Path, skill: str) -> float | None:
-    path = Path(out) / skill / "held_out_before.json"
-    return load_json(path, "delete it; the command measures it again")["success_rate"] if path.is_file() else None
 
 
 def run_rows(out: Path) -> list[dict]:
     """``table.csv``'s rows: one per stored run, skills by name, then seed."""
     rows = []
     for skill, runs in sorted(_runs(out).items()):
-        before = _before(out, skill)
+        before = held_out_before(out, skill)
         for _, s in runs:
             rows.append({"skill": skill, "seed": int(s["seed"]), "held_out_before": before,
                          "held_out_after": s.get("held_out_after"), "reward_auc": s.get("reward_auc"),
@@ -89,15 +88,13 @@ def run_rows(out: Path) -> list[dict]:
 
 def _skill_figures(out: Path, skill: str, runs, rule) -> dict:
     """The skill's pooled figures (summary.json's entry) and its two plots."""
-    from drake_skill.learning.reward_quality import plot_return_vs_state, reward_quality
+    from drake_skill.learning.reward_quality import SUMMARY_KEYS, plot_return_vs_state, reflex_rate, reward_quality
 
     rollouts = [r for folder, _ in runs for r in _rollouts(folder)]
     quality = reward_quality(rollouts, rule)
-    before = _before(out, skill)
-    entry = {"reward_auc": quality["reward_auc"], "verdict_fpr": quality["verdict_fpr"],
-             "verdict_fnr": quality["verdict_fnr"], "held_out_before": [before for _ in runs],
-             "held_out_after": [s.get("held_out_after") for _, s in runs],
-             "reflex_rate": sum(r["reason"] == "reflex" for r in rollouts) / max(len(rollouts), 1),
+    before = held_out_before(out, skill)
+    entry = {**{k: quality[k] for k in SUMMARY_KEYS}, "held_out_before": [before for _ in runs],
+             "held_out_after": [s.get("held_out_after") for _, s in runs], "reflex_rate": reflex_rate(rollouts),
              "rollouts": len(rollouts), "seeds": [int(s["seed"]) for _, s in runs]}
     runs_text = f"{len(runs)} run" + ("" if len(runs) == 1 else "s")
     plot_return_vs_state(rollouts, rule, out / f"{skill}_return_vs_state.png",

@@ -27,7 +27,8 @@ from drake_skill.fileio import atomic_write_text, load_json, read_csv_rows
 from drake_skill.learning.loop import REWARDS
 from drake_skill.learning.policy_search import METHODS
 
-__all__ = ["COLUMNS", "TABLE_NAME", "read_table", "run_rows", "stored_runs", "table_text", "write_table"]
+__all__ = ["COLUMNS", "TABLE_NAME", "held_out_before", "read_table", "run_rows", "stored_runs", "table_text",
+           "write_table"]
 
 COLUMNS = ("skill", "method", "reward", "run", "episode", "rollouts_used", "success", "return",
            "held_out_after", "held_out_before")
@@ -59,7 +60,9 @@ def stored_runs(out) -> list[dict]:
     return sorted(summaries, key=lambda s: (*cell_key(s["skill"], s["method"], s["reward"]), int(s["run"])))
 
 
-def _before(out, skill: str) -> float | None:
+def held_out_before(out, skill: str) -> float | None:
+    """The held-out success rate of a skill's fitted policy (``OUT/SKILL/held_out_before.json``); None
+    when not measured."""
     path = Path(out) / skill / "held_out_before.json"
     fix = "delete it; 'drake-skill experiment run' measures it again"
     return load_json(path, fix)["success_rate"] if path.is_file() else None
@@ -99,7 +102,7 @@ def write_table(out, path=None) -> Path:
     for summary in stored_runs(out):
         skill = summary["skill"]
         if skill not in befores:
-            befores[skill] = _before(out, skill)
+            befores[skill] = held_out_before(out, skill)
         rows += run_rows(summary, befores[skill])
     return atomic_write_text(Path(path) if path is not None else Path(out) / TABLE_NAME, table_text(rows))
 

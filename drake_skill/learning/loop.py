@@ -494,10 +494,11 @@ class LearningRun:
         """``reward_auc``, ``verdict_fpr``, ``verdict_fnr`` (:func:`~drake_skill.learning.reward_quality.
         reward_quality`) and ``reflex_rate`` over the run's rollouts, and ``return_vs_state.png``; on the
         robot, where no execution has a ground-truth object state (NaN), only ``reflex_rate``."""
-        from drake_skill.learning.reward_quality import plot_return_vs_state, reward_quality
+        from drake_skill.learning.reward_quality import (SUMMARY_KEYS, plot_return_vs_state, reflex_rate,
+                                                         reward_quality)
 
         rollouts = [r for r in self.state.records if r["type"] == "rollout"]
-        reflex = {"reflex_rate": sum(r["reason"] == "reflex" for r in rollouts) / max(len(rollouts), 1)}
+        reflex = {"reflex_rate": reflex_rate(rollouts)}
         executions = (r for r in self.state.records if r["type"] in ("rollout", "greedy"))
         if not any(r.get("final_object_state") is not None for r in executions):
             return reflex
@@ -505,7 +506,7 @@ class LearningRun:
         quality = reward_quality(rollouts, rule)
         plot_return_vs_state(rollouts, rule, self.out_dir / "return_vs_state.png",
                              title=f"{self.skill.name}: learned return of the run's rollouts")
-        return {**{k: quality[k] for k in ("reward_auc", "verdict_fpr", "verdict_fnr")}, **reflex}
+        return {**{k: quality[k] for k in SUMMARY_KEYS}, **reflex}
 
     def _save_learned_skill(self, weights, episode: int) -> None:
         """``skill/``: the initial DMP's weights replaced by ``weights`` (the mean after update ``episode``)."""
@@ -555,8 +556,8 @@ class LearningRun:
             return None
         seeds = [config.held_out_seed0 + i for i in range(config.held_out)]
         b = self._bar(len(seeds), f"held-out poses ({phase})")
+        weights = self.weights_of(self.state.search.mean) if weights is None else weights
         try:
-            weights = self.weights_of(self.state.search.mean) if weights is None else weights
             report, _ = evaluate_greedy(self._pool, weights, seeds, lambda i, r: b.update(1))
         finally:
             b.close()

@@ -28,7 +28,11 @@ from typing import Any, Iterable
 
 import numpy as np
 
-__all__ = ["plot_return_vs_state", "records_from_report", "reward_quality", "rule_direction"]
+__all__ = ["SUMMARY_KEYS", "plot_return_vs_state", "records_from_report", "reflex_rate", "reward_quality",
+           "rule_direction"]
+
+#: The figures of :func:`reward_quality` a learning run's ``summary.json`` and the generalization study keep.
+SUMMARY_KEYS = ("reward_auc", "verdict_fpr", "verdict_fnr")
 
 #: The fields :func:`reward_quality` reads from every record.
 FIELDS = ("failed", "dense_return", "verdict", "success", "final_object_state")
@@ -150,6 +154,12 @@ def reward_quality(records: Iterable[Mapping], rule) -> dict[str, Any]:
         "failures": dict(sorted(Counter(str(r.get("reason") or "error") for r in records if r["failed"]).items())),
         "successes": int(y.sum()), "verdict_successes": int(v.sum()),
     }
+
+
+def reflex_rate(records: Iterable[Mapping]) -> float:
+    """The share of rollout records that tripped the collision reflex (``reason`` "reflex"); 0 with none."""
+    records = list(records)
+    return sum(r.get("reason") == "reflex" for r in records) / max(len(records), 1)
 
 
 def records_from_report(report: Mapping, source: str = "") -> list[dict[str, Any]]:
