@@ -574,7 +574,8 @@ def check_demonstrations_meet_rule(demos: Sequence, spec) -> None:
     rule = getattr(spec, "success", None)
     if rule is None or not getattr(rule, "joint", "") or not len(demos):
         return
-    finals = [float(getattr(d, "final_object_state", float("nan")) or float("nan")) for d in demos]
+    finals = [float("nan") if getattr(d, "final_object_state", None) is None else float(d.final_object_state)
+              for d in demos]
     if not all(np.isfinite(finals)) or any(judge_success(v, rule) for v in finals):
         return
     side = f">= {rule.above:g}" if rule.above is not None else f"<= {rule.below:g}"

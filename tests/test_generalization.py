@@ -3,6 +3,7 @@
 import csv
 import json
 
+import pytest
 
 from drake_skill.cli.main import main
 from drake_skill.experiments.generalization import COLUMNS, generalization_config, verdicts, write_report
@@ -96,3 +97,19 @@ def test_fit_refuses_demonstrations_that_never_meet_the_skills_rule(tmp_path_fac
     assert "no demonstration meets the skill's success rule (lid_hinge <= -0.5; they end at" in err
     assert err.endswith("or correct 'success' in the skill file 'close' to what the demonstrations show")
     assert not out.exists()
+
+
+def test_a_demonstration_ending_at_exactly_zero_is_judged_not_skipped():
+    from types import SimpleNamespace
+
+    from drake_skill.skill import check_demonstrations_meet_rule
+    from drake_skill.station.config import SuccessConfig
+
+    spec = SimpleNamespace(name="lift", success=SuccessConfig(joint="j", above=0.5))
+    demos = [SimpleNamespace(final_object_state=0.0, path="a.npz"), SimpleNamespace(final_object_state=0.2)]
+    with pytest.raises(ValueError, match=r"a.npz, demos\[1\]: no demonstration meets .* they end at 0, 0.2"):
+        check_demonstrations_meet_rule(demos, spec)
+    demos[1].final_object_state = 0.6
+    check_demonstrations_meet_rule(demos, spec)                 # one meets it
+    demos[1].final_object_state = None                          # no ground truth: not judged
+    check_demonstrations_meet_rule(demos, spec)
