@@ -2,6 +2,8 @@
 (issue 47 item 1): the valid keys and the nearest one, in dataclasses and Drake's config
 structs alike, at any depth."""
 
+import re
+from pathlib import Path
 import pytest
 
 from drake_skill.cli.main import main
@@ -106,3 +108,28 @@ def test_a_directive_naming_no_frame_or_model_is_named_by_its_index(child, expec
     message = str(raised.value)
     assert message.startswith(f"scenario directives[{i}] (add_weld {{parent: world, child: {child}}}): ")
     assert expected in message and message.endswith("; fix that directive") and "\n" not in message
+
+
+@pytest.mark.parametrize("edit, expected", [
+    (("panda::panda_link0", "panda::panda_linkX"), "directives[1] (add_weld {parent: world, child: panda::panda_linkX}): "
+                                                   "no frame 'panda_linkX' in model 'panda'"),
+    (("package://drake_skill_models/drawer.sdf", "broken.sdf"), "directives[6] (add_model {name: drawer, file: file://"),
+])
+def test_a_scenario_file_with_a_bad_directive_is_one_line_naming_the_file(tmp_path, capsys, edit, expected):
+    """A weld to a frame no model has, or a model file Drake cannot parse: found where the scenario
+    file loads, one line naming the file, the directive and its index, exit 2 (issues 46, 47)."""
+    import drake_skill
+
+    package = Path(drake_skill.__file__).parent
+    (tmp_path / "broken.sdf").write_text('<sdf version="1.7"><model name="drawer"><link name="x"></model></sdf>')
+    scenario = tmp_path / "scene.yaml"
+    text = (package / "station" / "scenarios" / "drawer.yaml").read_text()
+    assert edit[0] in text
+    scenario.write_text(text.replace(edit[0], edit[1]))
+    skill = tmp_path / "skill.yaml"
+    skill.write_text(re.sub(r"(?m)^scenario:.*$", f"scenario: {scenario}",
+                            (package / "skills" / "draw.yaml").read_text()))
+    code = main(["skills", str(skill), "--check-camera"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "\n" not in err and "Traceback" not in err
+    assert f"station config ({scenario}): scenario {expected}" in err and err.endswith("; fix that directive")

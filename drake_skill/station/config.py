@@ -26,7 +26,7 @@ from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.geometry import RenderEngineVtkParams
 from pydrake.math import RigidTransform
-from pydrake.multibody.parsing import ModelDirective
+from pydrake.multibody.parsing import ModelDirective, ModelDirectives
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.sensors import CameraConfig
 
@@ -521,27 +521,37 @@ def _validate_directives(config: StationConfig) -> None:
     for field in ("base_body", "joint"):
         if not getattr(obj, field):
             _bad(f"object.{field}", getattr(obj, field), f"the name of the object model's {field.replace('_', ' ')}")
-    _check_object_model(config, config.directives[added[obj.model]].add_model.file)
+    from drake_skill.station.placement import object_parts
+
+    plant = _directives_plant(_directives_key(config.directives))
+    object_parts(plant, plant.GetModelInstanceByName(obj.model), config)
 
 
-def _check_object_model(config: StationConfig, url: str) -> None:
-    """Parses the object's model alone (milliseconds): its base body, its joint and the
-    initial joint position within the joint's limits (``placement.object_parts``)."""
+def _directives_key(directives) -> tuple:
+    """The directives' text and the modification times of the user's model files (``file://``):
+    a scenario whose files did not change is parsed once per process."""
+    files = [d.add_model.file[len("file://"):] for d in directives
+             if d.add_model is not None and d.add_model.file.startswith("file://")]
+    return yaml_dump_typed(ModelDirectives(directives=list(directives))), \
+        tuple(Path(f).stat().st_mtime_ns for f in files)
+
+
+@functools.lru_cache(maxsize=16)
+def _directives_plant(key: tuple):
+    """Every directive processed on a scratch plant (~0.1 s; the station processes the same list),
+    so a frame no model has or a model Drake cannot parse is found where the scenario file
+    loads, and ``load_station_config`` names the file. Read-only for its callers."""
+    from pydrake.common.yaml import yaml_load_typed as load
     from pydrake.multibody.parsing import Parser
     from pydrake.multibody.plant import MultibodyPlant
 
-    from drake_skill.station.placement import object_parts
-    from drake_skill.station.models import add_package_paths
+    from drake_skill.station.models import add_package_paths, process_directives
 
     plant = MultibodyPlant(0.0)
     parser = Parser(plant)
     add_package_paths(parser.package_map())
-    try:
-        instance = parser.AddModels(url=url)[0]
-    except RuntimeError as e:
-        _bad("directives (the object's add_model.file)", url,
-             f"a model Drake parses ({' '.join(str(e).split())[:200]})")
-    object_parts(plant, instance, config)
+    process_directives(load(schema=ModelDirectives, data=key[0]).directives, plant, parser)
+    return plant
 
 
 def validate_success(rule: SuccessConfig, field: str = "success", what: str = "station config") -> SuccessConfig:
