@@ -1,14 +1,17 @@
 """Skills as data: the shipped skill files, the loader's checks and the keyframes' follow-through."""
 
+import math
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from drake_skill.skills import keyframes, load_skill, shipped_skill_names
 from drake_skill.skills.spec import REACH_M, SHOULDER
+from drake_skill.station.config import SuccessConfig
 
 SKILL = """\
 name: {name}
@@ -135,3 +138,211 @@ def test_skills_command_lists_the_shipped_skills_and_checks_a_file(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "drake_skill.cli.main", "skills",
                           str(_write(tmp_path, joint="lid_hinge"))], capture_output=True, text=True)
     assert bad.returncode == 2 and "success.joint" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
+
+
+# ----------------------------------------------------------------------------- the checks' bounds, one field each
+def _spec(**changes):
+    """A valid skill (the drawer's scenario, one keyframe) with ``changes``."""
+    from drake_skill.skills.spec import Keyframe, SkillSpec
+
+    fields = dict(name="a-b_C9", scenario="drawer", success=SuccessConfig(joint="drawer_slide", above=0.05),
+                  keyframes=[Keyframe(t=1.0, gripper=0.0)])
+    fields.update(changes)
+    return SkillSpec(**fields)
+
+
+def _check_message(**changes):
+    from drake_skill.skills.spec import _check
+
+    try:
+        _check(_spec(**changes), "W")
+    except ValueError as e:
+        return str(e)
+    return None
+
+
+@pytest.mark.parametrize("changes", [
+    {}, dict(demonstrations=1), dict(dmp_bases=3), dict(dmp_bases=100), dict(exploration_scale=100.0),
+    dict(exploration_scale=1e-9), dict(dmp_unscaled_dims=[0, 6]), dict(initial_dmp="best-return"),
+    dict(initial_dmp_poses=1), dict(initial_dmp_poses=100), dict(gripper_opening=0.0), dict(gripper_opening=0.08),
+    dict(scenario="drake_skill/station/scenarios/drawer.yaml"),
+])
+def test_the_edges_of_every_skill_field_are_valid(changes):
+    if "scenario" in changes:
+        from drake_skill.station.config import SCENARIO_DIR
+
+        changes = dict(scenario=str(SCENARIO_DIR / "drawer.yaml"))
+    assert _check_message(**changes) is None
+
+
+def test_each_skill_field_error_in_full():
+    from drake_skill.skills.spec import Keyframe
+    from drake_skill.station.config import SCENARIO_DIR, SuccessConfig
+
+    expected = {
+        "name": "a name of letters, digits, '_' and '-'",
+    }
+    assert _check_message(name="") == f"skill file W field 'name' = '': expected {expected['name']}"
+    assert _check_message(name="a.b") == f"skill file W field 'name' = 'a.b': expected {expected['name']}"
+    assert _check_message(scenario="") == ("skill file W field 'scenario' = '': expected a shipped scenario's "
+                                           "name (drake-skill skills) or a scenario YAML")
+    shipped = ", ".join(sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml")))
+    assert "drawer" in shipped and "box_closed" in shipped
+    assert _check_message(scenario="cupboard") == (
+        f"skill file W field 'scenario' = 'cupboard': expected a shipped scenario ({shipped}) or an existing "
+        f"YAML file ({SCENARIO_DIR / 'cupboard.yaml'} does not exist)")
+    assert _check_message(demonstrations=0) == \
+        "skill file W field 'demonstrations' = 0: expected at least 1 (the thesis: 2 or 3)"
+    for bases in (2, 101):
+        assert _check_message(dmp_bases=bases) == (
+            f"skill file W field 'dmp_bases' = {bases}: expected 3..100 basis functions (thesis Table 6.1: 9-20), "
+            "or null to choose them from the fit tolerance")
+    for scale in (0.0, -1.0, 100.5, math.inf, math.nan):
+        assert _check_message(exploration_scale=scale) == \
+            f"skill file W field 'exploration_scale' = {scale!r}: expected a factor in (0, 100] on Sigma_b^0"
+    for dims in ([-1], [7], [2, 2]):
+        assert _check_message(dmp_unscaled_dims=dims) == (
+            f"skill file W field 'dmp_unscaled_dims' = {dims!r}: expected distinct weight columns in 0..6 (0-2: "
+            "x, y, z; 3-6: quaternion w, x, y, z)")
+    assert _check_message(initial_dmp="best") == \
+        "skill file W field 'initial_dmp' = 'best': expected one of random, best-return"
+    for poses in (0, 101):
+        assert _check_message(initial_dmp_poses=poses) == (
+            f"skill file W field 'initial_dmp_poses' = {poses}: expected 1..100 object poses per demonstration's DMP")
+    for opening in (-0.001, 0.0801):
+        assert _check_message(gripper_opening=opening) == (
+            f"skill file W field 'gripper_opening' = {opening}: expected an opening in [0, 0.08] m, or null for "
+            "the demonstrations' median")
+    assert _check_message(success=SuccessConfig(joint="", above=0.05)) == (
+        "skill file W field 'success.joint' = '': expected the name of the object's joint the rule reads")
+    keys = [Keyframe(t=1.0), Keyframe(t=1.0)]
+    assert _check_message(keyframes=keys) == (
+        "skill file W field 'keyframes[1].t' = 1.0: expected times that increase from 0 (the previous is 1.0 s)")
+    for t in (0.0, math.nan):
+        assert _check_message(keyframes=[Keyframe(t=t)]) == (
+            f"skill file W field 'keyframes[0].t' = {t!r}: expected times that increase from 0 (the previous is "
+            "0.0 s)")
+    assert _check_message(keyframes=[Keyframe(t=0.5, gripper=0.08), Keyframe(t=1.0, gripper=0.0801)]) == (
+        "skill file W field 'keyframes[1].gripper' = 0.0801: expected an opening in [0, 0.08] m")
+    assert _check_message(keyframes=[Keyframe(t=0.5, gripper=-0.001)]).startswith(
+        "skill file W field 'keyframes[0].gripper' = -0.001")
+
+
+def _at_origin(spec, x=0.0, randomize_xy=0.0, randomize_yaw=0.0):
+    config = spec.station_config()
+    o = config.object
+    o.x, o.y, o.yaw, o.randomize_xy, o.randomize_yaw = x, 0.0, 0.0, randomize_xy, randomize_yaw
+    return config
+
+
+def test_reach_is_checked_on_every_corner_of_the_placement_range():
+    """Via points just within the 0.855 m reach at the nominal pose, out of it on one corner
+    of the placement range: x or y shifted out, or the yaw turned one way."""
+    from pydrake.common.schema import Transform
+
+    from drake_skill.skills.spec import Keyframe, check_with_scenario
+
+    def at(p):
+        return _spec(keyframes=[Keyframe(t=1.0, pose=Transform(translation=p))])
+
+    def message(spec, config):
+        with pytest.raises(ValueError) as e:
+            check_with_scenario(spec, config, "W")
+        return str(e.value)
+
+    along_x, along_y = at([0.84, 0.0, 0.333]), at([0.0, -0.84, 0.333])       # 0.84 m from the shoulder
+    check_with_scenario(along_x, _at_origin(along_x, randomize_xy=0.01))     # at most 0.85 m
+    for spec in (along_x, along_y):
+        assert message(spec, _at_origin(spec, randomize_xy=0.02)).endswith(
+            "expected a pose within the Panda's 0.855 m reach on every object pose the scenario draws (this one "
+            "is 0.86 m from the shoulder); move it or the object closer")
+    assert message(along_x, _at_origin(along_x, randomize_xy=0.02)).startswith(
+        "skill file W field 'keyframes[0].pose' = [0.84, 0.0, 0.333]: ")
+    # Off the axis, 0.854 m at the nominal pose: turned by -0.1 rad it is 0.857 m away, by +0.1 rad 0.850 m.
+    off = at([0.7, 0.3, 0.333])
+    check_with_scenario(off, _at_origin(off, x=0.1))
+    assert "(this one is 0.86 m" in message(off, _at_origin(off, x=0.1, randomize_yaw=0.1))
+    mirrored = at([0.7, -0.3, 0.333])
+    assert "(this one is 0.86 m" in message(mirrored, _at_origin(mirrored, x=0.1, randomize_yaw=0.1))
+    # The second keyframe is named by its index.
+    two = _spec(keyframes=[Keyframe(t=1.0), Keyframe(t=2.0, pose=Transform(translation=[0.9, 0.0, 0.333]))])
+    assert message(two, _at_origin(two)).startswith("skill file W field 'keyframes[1].pose' = [0.9, 0.0, 0.333]")
+    spec = _spec(success=SuccessConfig(joint="lid_hinge", above=1.0))
+    with pytest.raises(ValueError) as e:
+        check_with_scenario(spec, spec.station_config())
+    assert str(e.value) == ("skill file skill 'a-b_C9' field 'success.joint' = 'lid_hinge': expected the "
+                            "scenario's object's one joint, 'drawer_slide'")
+
+
+def test_follow_through_bounds_and_the_ends_of_the_screw():
+    spec = load_skill("open")
+    moved = [i for i, k in enumerate(spec.keyframes) if k.least is not None]
+    full, least = keyframes(spec, 1.0), keyframes(spec, 0.0)
+    for i in moved:
+        X, X0 = spec.keyframes[i].pose.GetDeterministicValue(), spec.keyframes[i].least.GetDeterministicValue()
+        np.testing.assert_array_equal(full[i][1], X.translation())              # exactly the pose at 1
+        np.testing.assert_array_equal(full[i][2].matrix(), X.rotation().matrix())
+        np.testing.assert_array_equal(least[i][1], X0.translation())            # exactly least at 0
+        assert (full[i][0], full[i][3]) == (spec.keyframes[i].t, spec.keyframes[i].gripper)
+    for f in (-1e-9, 1.0 + 1e-9):
+        with pytest.raises(ValueError) as e:
+            keyframes(spec, f)
+        assert str(e.value) == f"follow_through: expected a fraction in [0, 1], got {f!r}"
+
+
+def test_screw_motion_by_hand():
+    """A quarter turn about z with a translation: the screw's pose at 1/2 is an eighth turn,
+    half the rise, on the helix; at 0 and below it is the start."""
+    from pydrake.math import RigidTransform, RotationMatrix
+
+    from drake_skill.skills.spec import _screw
+
+    X0 = RigidTransform([1.0, 0.0, 0.0])
+    X1 = RigidTransform(RotationMatrix.MakeZRotation(np.pi / 2), [0.0, 1.0, 0.4])
+    half = _screw(X0, X1, 0.5)
+    np.testing.assert_allclose(half.translation(), [np.cos(np.pi / 4), np.sin(np.pi / 4), 0.2], atol=1e-12)
+    np.testing.assert_allclose(half.rotation().matrix(), RotationMatrix.MakeZRotation(np.pi / 4).matrix(), atol=1e-12)
+    assert _screw(X0, X1, 0.0) is X0 and _screw(X0, X1, -0.5) is X0
+    np.testing.assert_allclose(_screw(X0, X1, 1.0).GetAsMatrix4(), X1.GetAsMatrix4(), atol=1e-12)
+
+
+def test_scenario_paths_and_load_errors(tmp_path):
+    from drake_skill.skills.spec import SKILL_DIR, SkillSpec, scenario_for_skill
+    from drake_skill.station.config import SCENARIO_DIR
+
+    assert SkillSpec(scenario="drawer").scenario_path() == SCENARIO_DIR / "drawer.yaml"
+    for text in ("my.yaml", "my.yml", "scenes/drawer"):
+        assert SkillSpec(scenario=text).scenario_path() == Path(text)
+    assert SkillSpec(scenario="").scenario_path() == Path("")
+    spec = load_skill("draw")
+    assert load_skill(spec) is spec
+    assert SKILL_DIR == Path(__file__).resolve().parent.parent / "drake_skill" / "skills"
+    names = ", ".join(shipped_skill_names())
+    with pytest.raises(FileNotFoundError) as e:
+        load_skill("jump")
+    assert str(e.value) == (f"skill 'jump': not a shipped skill ({names}) and not a file; give one of those or a "
+                            "path to a skill YAML")
+    for text in (str(tmp_path / "jump.yaml"), "nowhere/jump"):
+        with pytest.raises(FileNotFoundError) as e:
+            load_skill(text)
+        assert str(e.value) == (f"skill file {text}: no such file; give a shipped skill's name ({names}) or an "
+                                "existing skill YAML")
+    path = _write(tmp_path, text="name: push\nscenario: drawer\nsucess: {}\n")
+    with pytest.raises(ValueError) as e:
+        load_skill(path)
+    assert str(e.value).endswith("; see docs/skills.md for the fields") and str(path) in str(e.value)
+    # A scenario whose own check fails (a bad scenario file) is named after the skill file.
+    (tmp_path / "bad.yaml").write_text(load_skill("draw").scenario_path().read_text() + "\ntime_step: -1.0\n")
+    path = _write(tmp_path, scenario="bad.yaml")
+    with pytest.raises(ValueError) as e:
+        load_skill(path)
+    assert str(e.value).startswith(f"{path}: scenario {tmp_path / 'bad.yaml'}: ")
+    # An absolute scenario path is kept as it is.
+    absolute = _write(tmp_path, name="abs", scenario=str(SCENARIO_DIR / "drawer.yaml"))
+    assert load_skill(absolute).scenario == str(SCENARIO_DIR / "drawer.yaml")
+    assert scenario_for_skill("draw").success.joint == "drawer_slide"
+    defaults = load_skill("draw").station_defaults()
+    assert defaults.object.model == "drawer" and defaults.success == load_skill("draw").success
+    (tmp_path / "over.yaml").write_text("object: {x: 0.61}\n")
+    over = load_skill("draw").station_defaults(tmp_path / "over.yaml")
+    assert over.object.x == 0.61 and over.object.model == "drawer" and over.success.joint == "drawer_slide"

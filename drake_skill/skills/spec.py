@@ -180,7 +180,7 @@ def check_with_scenario(spec: SkillSpec, config: StationConfig, where: str = "")
                                           [obj.x + sx * obj.randomize_xy, obj.y + sy * obj.randomize_xy, 0.0])
                     far = float(np.linalg.norm(X_WO @ p_OE - SHOULDER))
                     if far > REACH_M:
-                        _bad(where, f"keyframes[{i}].pose", [round(v, 3) for v in p_OE],
+                        _bad(where, f"keyframes[{i}].pose", [round(float(v), 3) for v in p_OE],
                              f"a pose within the Panda's {REACH_M} m reach on every object pose the "
                              f"scenario draws (this one is {far:.2f} m from the shoulder); move it or the "
                              "object closer")
