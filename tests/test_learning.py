@@ -327,3 +327,81 @@ def test_a_run_exploring_the_span_returns_a_blend_of_the_demonstrations(tmp_path
     np.testing.assert_allclose(outcome.weights, skill.initial_weights + theta * (other - skill.initial_weights))
     np.testing.assert_array_equal(Skill.load(tmp_path / "run" / "skill").initial_weights, outcome.weights)
     assert json.loads((tmp_path / "run" / "config.json").read_text())["learn"]["exploration_scale"] == 1.0
+
+
+# ----------------------------------------------------------------------------- runlog's pieces, by hand
+def test_progress_rows_and_their_csv_lines_by_hand(tmp_path):
+    from drake_skill.learning.runlog import _csv_line
+
+    row = progress_row({"episode": 3, "greedy_success": 1, "greedy_verdict": 0, "greedy_return": 12.5,
+                        "mean_return": 7.25, "best_return": 9.0, "exploration": 0.5, "rollout_successes": 2,
+                        "failures": {"solver": 1, "reflex": 2}, "ik_warnings": 4}, 5)
+    assert row == {"episode": 3, "rollouts_used": 15, "greedy_success": 1, "greedy_verdict": 0,
+                   "greedy_return": 12.5, "mean_return": 7.25, "best_return": 9.0, "exploration": 0.5,
+                   "rollout_successes": 2, "failures": 3, "failure_reasons": "reflex:2 solver:1", "ik_warnings": 4}
+    assert list(row) == list(PROGRESS_COLUMNS)
+    assert type(row["greedy_success"]) is int and type(row["greedy_verdict"]) is int
+    # Episode 0 (no rollouts yet): the rollout columns are None, not 0, whatever the row holds.
+    first = progress_row({"episode": 0, "greedy_success": True, "greedy_verdict": False, "greedy_return": 1.0,
+                          "exploration": 0.5, "rollout_successes": 0, "failures": {"x": 1}, "ik_warnings": 0}, 5)
+    assert (first["rollouts_used"], first["greedy_success"], first["greedy_verdict"]) == (0, 1, 0)
+    assert [first[k] for k in ("mean_return", "best_return", "rollout_successes", "failures", "ik_warnings")] \
+        == [None] * 5
+    assert first["failure_reasons"] == "x:1"
+    assert progress_row({"episode": 2, "greedy_success": 0, "greedy_verdict": 0, "greedy_return": 1.0,
+                         "exploration": 0.5, "mean_return": 0.0, "failures": None}, 3)["failures"] == 0
+    # Floats by repr (round trip), None empty, ints and text as they are, quoted where CSV needs it.
+    assert _csv_line([1, 0.1, None, np.float64(1 / 3), "a b", "x,y"]) == '1,0.1,,0.3333333333333333,a b,"x,y"\n'
+    log = RunLog(tmp_path, io.StringIO(), rollouts_per_episode=5)
+    log._tensorboard = lambda purge_step: None
+    log.start([], [], fresh=True)
+    log.row({"episode": 3, "greedy_success": 1, "greedy_verdict": 0, "greedy_return": 12.5, "mean_return": 7.25,
+             "best_return": 9.0, "exploration": 0.5, "rollout_successes": 2, "failures": {"solver": 1, "reflex": 2},
+             "ik_warnings": 4})
+    assert (tmp_path / "progress.csv").read_text().splitlines()[1] == "3,15,1,0,12.5,7.25,9.0,0.5,2,3,reflex:2 solver:1,4"
+    back, = read_progress(tmp_path / "progress.csv")
+    assert back == row and [type(back[k]) for k in ("episode", "greedy_return", "failures")] == [int, float, int]
+
+
+def test_the_logs_of_a_fresh_and_a_resumed_start(tmp_path):
+    note = io.StringIO()
+    (tmp_path / "tensorboard").mkdir()
+    (tmp_path / "tensorboard" / "old").write_text("x")
+    purges = []
+    log = RunLog(tmp_path, note, rollouts_per_episode=2)
+    assert (log.results_path, log.progress_path, log.tensorboard_dir) == \
+        (tmp_path / "results.jsonl", tmp_path / "progress.csv", tmp_path / "tensorboard")
+    log._tensorboard = lambda purge_step: purges.append(purge_step)
+    log.start([{"b": 1, "a": [2, 3]}], [], fresh=True)
+    assert not (tmp_path / "tensorboard").exists() and purges == [None]
+    assert (tmp_path / "results.jsonl").read_text() == '{"a": [2, 3], "b": 1}\n'
+    assert (tmp_path / "progress.csv").read_text() == ",".join(PROGRESS_COLUMNS) + "\n"
+    log.records([])
+    log.records([{"z": 0}, {"y": None}])
+    assert (tmp_path / "results.jsonl").read_text() == '{"a": [2, 3], "b": 1}\n{"z": 0}\n{"y": null}\n'
+    log.close()
+    # A resume keeps tensorboard/ and purges from the episode after the checkpoint's last.
+    (tmp_path / "tensorboard").mkdir()
+    resumed = RunLog(tmp_path, note, rollouts_per_episode=2)
+    resumed._tensorboard = lambda purge_step: purges.append(purge_step)
+    resumed.start([], [_curve_row(0, 1.0), _curve_row(4, 2.0, 1.0)], fresh=False)
+    resumed.start([], [], fresh=False)
+    assert purges == [None, 5, 0] and (tmp_path / "tensorboard").is_dir()
+    assert (tmp_path / "results.jsonl").read_text() == ""
+    assert note.getvalue() == ""
+
+
+def test_software_versions_name_every_package_and_the_checkout(monkeypatch):
+    from importlib import metadata
+    from pathlib import Path
+
+    import drake_skill
+    from drake_skill.learning import runlog
+
+    monkeypatch.setattr(runlog, "VERSIONED_PACKAGES", ("numpy", "no-such-distribution-xyz"))
+    versions = runlog.software_versions()
+    assert list(versions) == ["numpy", "no-such-distribution-xyz", "python", "git_commit", "git_dirty"]
+    assert versions["numpy"] == metadata.version("numpy") and versions["no-such-distribution-xyz"] is None
+    assert versions["python"] == sys.version.split()[0]
+    root = Path(drake_skill.__file__).resolve().parent.parent
+    assert (versions["git_commit"], versions["git_dirty"]) == _git_commit(root)

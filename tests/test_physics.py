@@ -277,3 +277,140 @@ def test_exploratory_rollouts_end_without_solver_failure():
         assert not result.failed or result.reason == "reflex", f"rollout {k}: {result.reason}: {result.message}"
         outcomes.append(result.reason or "completed")
     assert len(outcomes) == 12
+
+
+# ----------------------------------------------------------------------------- controller.py's pieces, by hand
+def test_control_plant_ee_frame_and_the_arm_and_hand_welds():
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from drake_skill.station.controller import (X_FLANGE_HAND, X_HAND_TCP, add_arm_and_hand, make_control_plant)
+
+    plant = make_control_plant()
+    assert plant.is_finalized() and plant.time_step() == 0.0 and plant.num_positions() == 7
+    context = plant.CreateDefaultContext()
+    X_8E = plant.CalcRelativeTransform(context, plant.GetFrameByName("panda_link8"), plant.GetFrameByName("ee"))
+    np.testing.assert_allclose(X_8E.GetAsMatrix4(), (X_FLANGE_HAND @ X_HAND_TCP).GetAsMatrix4(), atol=1e-15)
+    np.testing.assert_allclose(X_8E.translation(), [0.0, 0.0, 0.1034], atol=1e-15)
+    np.testing.assert_allclose(X_8E.rotation().ToRollPitchYaw().vector(), [0.0, 0.0, -np.pi / 4], atol=1e-15)
+    X_W0 = plant.CalcRelativeTransform(context, plant.world_frame(), plant.GetFrameByName("panda_link0"))
+    np.testing.assert_allclose(X_W0.GetAsMatrix4(), np.eye(4), atol=0)
+    aux = MultibodyPlant(time_step=0.0)
+    arm, hand = add_arm_and_hand(aux)
+    assert (aux.GetModelInstanceName(arm), aux.GetModelInstanceName(hand)) == ("panda", "panda_hand")
+    aux.Finalize()
+    assert aux.num_positions() == 9                     # the arm's 7 and the two fingers: the rest welded
+    ctx = aux.CreateDefaultContext()
+    X_8H = aux.CalcRelativeTransform(ctx, aux.GetFrameByName("panda_link8", arm), aux.GetFrameByName("panda_hand", hand))
+    np.testing.assert_allclose(X_8H.GetAsMatrix4(), X_FLANGE_HAND.GetAsMatrix4(), atol=1e-15)
+    X_W0 = aux.CalcRelativeTransform(ctx, aux.world_frame(), aux.GetFrameByName("panda_link0", arm))
+    np.testing.assert_allclose(X_W0.GetAsMatrix4(), np.eye(4), atol=0)
+
+
+def test_rate_limiter_constants_ports_and_period_errors():
+    from drake_skill.station.controller import LimiterConstants, RateLimiter
+
+    limiter = RateLimiter(3, 2e-3, 10.0, [1.0, 2.0, 3.0], 4.0, [5.0, 6.0, 7.0], 1e-3)
+    assert limiter._consts == LimiterConstants(2e-3, 100.0, 20.0, 1.0, [5.0 * 2e-3, 6.0 * 2e-3, 7.0 * 2e-3],
+                                               [4.0] * 3, [1.0, 2.0, 3.0])
+    assert RateLimiter(3, 2e-3, 10.0, 1.0, 1.0, 1.0, 8e-3)._consts.gain_ref == 0.25
+    assert limiter._substeps == 1 and limiter._lower is None and limiter._upper is None and limiter._scale == 1.0
+    assert limiter.GetUniquePeriodicDiscreteUpdateAttribute().period_sec() == 2e-3
+    assert limiter.GetUniquePeriodicDiscreteUpdateAttribute().offset_sec() == 0.0
+    assert [limiter.get_output_port(i).get_name() for i in range(2)] == ["state", "acceleration"]
+    assert limiter.get_input_port().get_name() == "reference" and limiter.get_input_port().size() == 3
+    assert (limiter.GetOutputPort("state").size(), limiter.GetOutputPort("acceleration").size()) == (6, 3)
+    by3 = RateLimiter(3, 2e-3, 10.0, 1.0, 1.0, 1.0, 1e-3, update_period=6e-3)
+    assert by3._substeps == 3 and by3.GetUniquePeriodicDiscreteUpdateAttribute().period_sec() == pytest.approx(6e-3)
+    for update in (0.9e-3, 5e-3):
+        with pytest.raises(ValueError) as e:
+            RateLimiter(3, 2e-3, 10.0, 1.0, 1.0, 1.0, 1e-3, update_period=update)
+        assert str(e.value) == (f"RateLimiter: update_period = {update} s must be a whole number of periods "
+                                "(0.002 s); set controller.limiter_period to divide the plant's time_step")
+
+
+def test_rate_limiter_scales_and_clips_the_reference_and_outputs_its_state():
+    from drake_skill.station.controller import RateLimiter, limiter_step
+
+    limiter = RateLimiter(2, 1e-3, 40.0, 0.5, 4.0, 400.0, 0.01, reference_scale=0.5, lower=[0.0, 0.01],
+                          upper=0.04, update_period=2e-3)
+    context = limiter.CreateDefaultContext()
+    limiter.set_position(context, [0.02, 0.03])
+    np.testing.assert_array_equal(context.get_discrete_state_vector().CopyToVector(),
+                                  [0.02, 0.03, 0, 0, 0, 0, 0.02, 0.03, 0, 0])
+    x = context.get_discrete_state_vector().CopyToVector().tolist()
+    for reference, clipped in (([0.1, -1.0], [0.04, 0.01]), ([-0.2, 0.05], [0.0, 0.025])):
+        limiter.get_input_port().FixValue(context, reference)
+        x = limiter_step(limiter_step(x, clipped, limiter._consts), clipped, limiter._consts)
+        context.SetDiscreteState(limiter.EvalUniquePeriodicDiscreteUpdate(context))
+        assert context.get_discrete_state_vector().CopyToVector().tolist() == x
+        assert x[6:8] == clipped
+        np.testing.assert_array_equal(limiter.GetOutputPort("state").Eval(context), x[:4])
+        np.testing.assert_array_equal(limiter.GetOutputPort("acceleration").Eval(context), x[4:6])
+    assert any(x[2:4]) and any(x[4:6])             # it moved
+
+
+def test_finger_limiter_halves_and_clips_the_opening():
+    from pydrake.systems.analysis import Simulator
+
+    from drake_skill.station.config import ControllerConfig
+    from drake_skill.station.controller import FINGER_ACCEL_MAX, LimiterConstants, make_finger_limiter
+
+    config = ControllerConfig(limiter_period=1e-3, limiter_bandwidth=30.0, diff_ik_period=0.02)
+    fingers = make_finger_limiter(config, update_period=3e-3)
+    limiter = fingers.limiter
+    assert limiter._consts == LimiterConstants(1e-3, 900.0, 60.0, 0.05, [100.0 * FINGER_ACCEL_MAX * 1e-3] * 2,
+                                               [FINGER_ACCEL_MAX] * 2, [limits.FINGER_SPEED_MAX] * 2)
+    assert (limiter._scale, limiter._lower, limiter._upper, limiter._substeps) == \
+        (0.5, [0.0, 0.0], [limits.FINGER_MAX] * 2, 3)
+    assert fingers.get_input_port().get_name() == "opening" and fingers.get_input_port().size() == 1
+    assert fingers.get_output_port().get_name() == "finger_state_desired"
+    context = fingers.CreateDefaultContext()
+    for opening, half in ((0.03, 0.015), (1.0, limits.FINGER_MAX), (-0.2, 0.0)):
+        fingers.set_opening(context, opening)
+        np.testing.assert_array_equal(fingers.get_output_port().Eval(context), [half, half, 0.0, 0.0])
+    fingers.set_opening(context, 0.03)
+    fingers.get_input_port().FixValue(context, [1.0])     # an opening past the travel: each finger to its end
+    simulator = Simulator(fingers, context)
+    simulator.AdvanceTo(1.0)
+    np.testing.assert_allclose(fingers.get_output_port().Eval(context), [limits.FINGER_MAX] * 2 + [0.0] * 2,
+                               atol=1e-9)
+
+
+def test_end_effector_controller_ik_parameters_and_reset():
+    from drake_skill.station.config import ControllerConfig
+    from drake_skill.station.controller import EndEffectorController
+
+    config = ControllerConfig(diff_ik_period=0.02, velocity_scale=0.5, ee_speed_max=0.3, limiter_period=1e-3,
+                              limiter_bandwidth=25.0, joint_centering_gain=2.5)
+    q_home = np.array([0.0, -0.5, 0.0, -2.0, 0.0, 1.6, 0.8])
+    controller = EndEffectorController(config, q_home, update_period=2e-3)
+    plant = controller.control_plant
+    params = controller._diff_ik.get_parameters()
+    assert params.get_time_step() == 0.02
+    lower, upper = params.get_joint_position_limits()
+    np.testing.assert_array_equal(lower, plant.GetPositionLowerLimits() + 0.05)
+    np.testing.assert_array_equal(upper, plant.GetPositionUpperLimits() - 0.05)
+    low_v, high_v = params.get_joint_velocity_limits()
+    np.testing.assert_array_equal(high_v, limits.QD_MAX * 0.5)
+    np.testing.assert_array_equal(low_v, -limits.QD_MAX * 0.5)
+    low_t, high_t = params.get_end_effector_translational_velocity_limits()
+    np.testing.assert_array_equal(low_t, [-0.3] * 3)
+    np.testing.assert_array_equal(high_t, [0.3] * 3)
+    assert params.get_end_effector_angular_speed_limit() == 2.0
+    np.testing.assert_array_equal(params.get_nominal_joint_position(), q_home)
+    np.testing.assert_array_equal(params.get_joint_centering_gain(), 2.5 * np.eye(7))
+    np.testing.assert_array_equal(plant.GetDefaultPositions(), q_home)
+    limiter = controller._limiter
+    assert (limiter._consts.h, limiter._consts.w2, limiter._consts.gain_ref, limiter._substeps) == \
+        (1e-3, 625.0, 0.05, 2)
+    assert limiter._consts.v_max == list(limits.QD_MAX) and limiter._consts.a_max == list(limits.QDD_MAX)
+    assert [controller.get_output_port(i).get_name() for i in range(2)] == \
+        ["panda_state_desired", "joint_acceleration_commanded"]
+    assert controller.get_input_port().get_name() == "X_WE_desired"
+    np.testing.assert_array_equal(controller._q_home, q_home)
+    context = controller.CreateDefaultContext()
+    q = q_home + 0.1
+    controller.set_joint_positions(context, q.tolist())
+    np.testing.assert_array_equal(controller.GetOutputPort("panda_state_desired").Eval(context), np.r_[q, np.zeros(7)])
+    ik_context = controller._diff_ik.GetMyContextFromRoot(context)
+    np.testing.assert_array_equal(ik_context.get_discrete_state(0).CopyToVector(), q)

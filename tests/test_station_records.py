@@ -1,0 +1,128 @@
+"""The loggers of a run (drake_skill.station.records) on a stand-in station: no plant, fixed numbers.
+
+The stand-in has the station's three output ports, each the discrete state of a counter that a
+periodic update every 1 ms advances, so that the value a logger sees at each step end is known.
+(tests/test_rollout.py checks the same loggers against a StationRecorder on the real station.)
+"""
+
+import numpy as np
+import pytest
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
+
+from drake_skill.station.records import StationLoggers, StationRecords, _interval_peaks
+
+STEP = 1e-3
+# The reflex's f_hat at update k (k = 0 the initial state): not monotonic, so a peak
+# over an interval is not its last value.
+FORCE = [0.0, 3.0, 1.0, 7.0, 2.0, 2.5, 9.0, 4.0, 0.5, 6.0, 1.5, 8.0, 3.5, 0.25, 5.0, 2.0]
+
+
+class _Counter(LeafSystem):
+    """Discrete state k (one value), advanced every STEP; outputs: ``panda_state`` (14)
+    [k, 2k, ..., 14k] / 100, ``object_state`` (2) [k / 10, -1], ``reflex_state`` (10)
+    [FORCE[k], k, 0, ...]."""
+
+    def __init__(self):
+        super().__init__()
+        self._k = self.DeclareDiscreteState(1)
+        self.DeclarePeriodicDiscreteUpdateEvent(STEP, 0.0, self._update)
+        self.DeclareVectorOutputPort("panda_state", 14, self._state, {self.xd_ticket()})
+        self.DeclareVectorOutputPort("object_state", 2, self._object, {self.xd_ticket()})
+        self.DeclareVectorOutputPort("reflex_state", 10, self._reflex, {self.xd_ticket()})
+
+    def _k_of(self, context) -> int:
+        return int(context.get_discrete_state(self._k).get_value()[0])
+
+    def _update(self, context, discrete_state):
+        discrete_state.set_value(self._k, [self._k_of(context) + 1.0])
+        return EventStatus.Succeeded()
+
+    def _state(self, context, output):
+        output.SetFromVector(self._k_of(context) * np.arange(1, 15) / 100.0)
+
+    def _object(self, context, output):
+        output.SetFromVector([self._k_of(context) / 10.0, -1.0])
+
+    def _reflex(self, context, output):
+        k = self._k_of(context)
+        output.SetFromVector(np.r_[FORCE[k % len(FORCE)], k, np.zeros(8)])
+
+    @staticmethod
+    def hand_pose(q) -> RigidTransform:
+        """X_WE of joint positions q (7): [q0, q1, q2] and a yaw of q3 rad."""
+        assert len(q) == 7
+        return RigidTransform(RollPitchYaw(0.0, 0.0, q[3]), [q[0], q[1], q[2]])
+
+
+def _run(record_hz: float, until: float):
+    builder = DiagramBuilder()
+    station = builder.AddSystem(_Counter())
+    loggers = StationLoggers(builder, station, record_hz)
+    simulator = Simulator(builder.Build())
+    simulator.Initialize()
+    simulator.AdvanceTo(until)
+    return loggers, simulator
+
+
+def test_interval_peaks_are_the_largest_from_the_previous_row_to_this_one():
+    values = np.array([5.0, 1.0, 4.0, 2.0, 9.0, 3.0, 0.0, 6.0])
+    np.testing.assert_array_equal(_interval_peaks(np.arange(8.0), values, np.array([1, 3, 4, 7])),
+                                  [1.0, 4.0, 9.0, 9.0])
+    # A repeated row is that row's value alone; the first sample is row r_0 alone.
+    np.testing.assert_array_equal(_interval_peaks(np.arange(8.0), values, np.array([0, 0, 2, 2, 5])),
+                                  [5.0, 5.0, 5.0, 4.0, 9.0])
+    assert _interval_peaks(np.arange(8.0), values, np.array([], dtype=int)).shape == (0,)
+
+
+def test_the_loggers_read_the_grid_samples_and_the_interval_peaks():
+    loggers, simulator = _run(record_hz=250.0, until=0.012)     # a sample every 4 steps
+    assert loggers.record_hz == 250.0 and isinstance(loggers.record_hz, float)
+    records = loggers.read(simulator.get_context(), 3)
+    assert isinstance(records, StationRecords)
+    np.testing.assert_array_equal(records.times, [0.0, 0.004, 0.008, 0.012])
+    k = np.array([0, 4, 8, 12])              # the counter at each step end at a grid time
+    np.testing.assert_allclose(records.state, k[:, None] * np.arange(1, 15) / 100.0, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(records.object_state, k / 10.0)
+    # Peaks of FORCE over k = 0, 0..4, 4..8, 8..12 (both ends included).
+    np.testing.assert_array_equal(records.contact_force, [0.0, 7.0, 9.0, 8.0])
+    assert records.ee_pose.shape == (4, 7)
+    for row, kk in zip(records.ee_pose, k):
+        q = kk * np.arange(1, 8) / 100.0
+        expected = np.r_[q[:3], RollPitchYaw(0.0, 0.0, q[3]).ToQuaternion().wxyz()]
+        np.testing.assert_allclose(row, expected, rtol=0, atol=1e-15)
+
+
+def test_a_run_stopped_early_has_fewer_samples_and_clear_empties_the_logs():
+    loggers, simulator = _run(record_hz=500.0, until=0.005)
+    context = simulator.get_mutable_context()
+    records = loggers.read(context, 10)                 # asked for 0..20 ms, reached 5 ms
+    np.testing.assert_array_equal(records.times, [0.0, 0.002, 0.004])
+    np.testing.assert_array_equal(records.object_state, [0.0, 0.2, 0.4])
+    np.testing.assert_array_equal(records.contact_force, [0.0, 3.0, 7.0])
+    # A grid time between step ends takes the first step end after it.
+    records = loggers.read(context, 2)
+    np.testing.assert_array_equal(records.times, [0.0, 0.002, 0.004])
+    loggers.clear(context)
+    empty = loggers.read(context, 10)
+    for name in ("times", "object_state", "contact_force"):
+        assert getattr(empty, name).shape == (0,), name
+    assert empty.ee_pose.shape == (0, 7) and empty.state.shape == (0, 14)
+    # Logging goes on after a clear (the grid still starts at 0: a run's reset also resets
+    # the time; here the grid times before the first step end take that step end).
+    simulator.AdvanceTo(0.007)
+    again = loggers.read(context, 10)
+    np.testing.assert_array_equal(again.times, [0.0, 0.002, 0.004, 0.006])
+    np.testing.assert_array_equal(again.object_state, [0.6] * 4)
+    np.testing.assert_array_equal(again.contact_force, [FORCE[6]] * 4)
+
+
+@pytest.mark.parametrize("record_hz", [300.0])
+def test_grid_times_between_step_ends_take_the_next_step_end(record_hz):
+    loggers, simulator = _run(record_hz=record_hz, until=0.01)
+    records = loggers.read(simulator.get_context(), 3)
+    np.testing.assert_allclose(records.times, np.arange(4) / record_hz)
+    # 1/300 s = 3.33 ms: the step end at 4 ms; 6.67 ms: 7 ms; 10 ms: 10 ms.
+    np.testing.assert_array_equal(records.object_state, [0.0, 0.4, 0.7, 1.0])
+    np.testing.assert_array_equal(records.contact_force, [0.0, 7.0, 9.0, 6.0])
