@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from drake_skill.cli.main import main
-from drake_skill.demos.format import MANIFEST, load_demonstrations, save_demonstration, save_demonstrations
+from drake_skill.demos.format import (MANIFEST, DemonstrationError, load_demonstrations, save_demonstration,
+                                      save_demonstrations)
 from test_demonstrations import _assert_same, make_demo
 
 
@@ -125,3 +126,142 @@ def test_replay_writes_a_meshcat_page_per_demonstration(tmp_path):
         assert b"panda_link7" in animation and b"box_lid" in animation      # the arm and the object move
         animations.append(animation)
     assert animations[0] != animations[1]           # each page plays its own joint positions
+
+
+# ----------------------------------------------------------------------------- drake_skill.demos.robomimic directly
+def _export(tmp_path, demos, name="set"):
+    from drake_skill.demos.robomimic import export_robomimic
+
+    save_demonstrations(demos, tmp_path / name)
+    return export_robomimic(tmp_path / name, tmp_path / f"{name}.hdf5")
+
+
+def test_export_attributes_rewards_and_perception_by_hand(tmp_path):
+    failed = make_demo(3, perception=False)
+    failed.success = False
+    failed.final_object_state = 0.25
+    path, demos = _export(tmp_path, [make_demo(0), failed])
+    assert path == tmp_path / "set.hdf5" and [d.seed for d in demos] == [0, 3]
+    with h5py.File(path, "r") as f:
+        assert json.loads(f["data"].attrs["env_args"]) == {
+            "env_name": "drake-skill-open", "type": "drake-skill",
+            "env_kwargs": {"skill": "open", "rate_hz": 10.0, "scenario": "box_closed",
+                           "action": "X_OE of the next sample (m, quaternion wxyz) and the gripper opening (m)"}}
+        assert f["data"].attrs["env_args"].startswith('{"env_kwargs": {"action": ')       # sorted keys
+        with_points, without = f["data/demo_0"], f["data/demo_1"]
+        points = with_points["obs/object_points"]
+        assert (points.compression, points.compression_opts) == ("gzip", 4)
+        np.testing.assert_array_equal(with_points["obs/object_points_valid"][()], demos[0].perception_valid)
+        np.testing.assert_array_equal(with_points["drake_skill/X_WO_start"][()], demos[0].X_WO_start)
+        assert "object_points" not in without["obs"] and "X_WO_start" not in without["drake_skill"]
+        np.testing.assert_array_equal(without["rewards"][()], np.zeros(failed.n_samples))
+        assert without["dones"].dtype == np.int64 and without["rewards"].dtype == np.float64
+        raw = without["drake_skill"].attrs
+        assert (raw["skill"], raw["seed"], raw["success"], raw["final_object_state"]) == ("open", 3, False, 0.25)
+        assert raw["seed"].dtype == np.int64 and type(raw["final_object_state"]) in (float, np.float64)
+        assert raw["metadata"] == '{"source": "test", "variation": {"pause_s": 0.25}}'
+        assert raw["source_file"] == "demo_001.npz"
+        for name in ("times_100hz", "X_OE_100hz", "q_100hz", "gripper_100hz", "object_state_100hz", "times",
+                     "X_WO_true"):
+            np.testing.assert_array_equal(without[f"drake_skill/{name}"][()], getattr(demos[1], name))
+
+
+def test_actions_and_sample_indices_by_hand():
+    from drake_skill.demos.robomimic import _sample_indices, actions
+
+    demo = make_demo(0, perception=False, n=31)              # 10 Hz samples at 0, 0.1, 0.2, 0.3 s
+    demo.gripper_100hz = np.arange(31) / 1000.0
+    np.testing.assert_array_equal(_sample_indices(demo), [0, 10, 20, 30])
+    act = actions(demo)
+    np.testing.assert_array_equal(act[:, :7], demo.X_OE[[1, 2, 3, 3]])
+    np.testing.assert_array_equal(act[:, 7], [0.0, 0.01, 0.02, 0.03])
+    # Times off the raw ones by up to 1e-9 still find them; more is an error.
+    demo.times = demo.times + np.r_[0.0, 0.9e-9, -0.9e-9, 0.0]
+    np.testing.assert_array_equal(_sample_indices(demo), [0, 10, 20, 30])
+    demo.times[1] += 2e-9
+    demo.path = "here.npz"
+    with pytest.raises(DemonstrationError) as e:
+        _sample_indices(demo)
+    assert str(e.value) == "here.npz: field 'times' is not a subset of times_100hz"
+
+
+def test_export_refuses_two_skills_and_names_no_scenario_for_a_users_skill(tmp_path):
+    from drake_skill.demos.robomimic import export_robomimic
+
+    save_demonstrations([make_demo(0, perception=False), make_demo(1, perception=False, skill="close")],
+                        tmp_path / "mixed")
+    with pytest.raises(DemonstrationError) as e:
+        export_robomimic(tmp_path / "mixed", tmp_path / "mixed.hdf5")
+    assert str(e.value) == (f"{tmp_path / 'mixed'}: holds demonstrations of close, open; a robomimic dataset is "
+                            "one task: export one skill's folder")
+    path, _ = _export(tmp_path, [make_demo(0, perception=False, skill="my_skill")], "mine")
+    with h5py.File(path, "r") as f:
+        kwargs = json.loads(f["data"].attrs["env_args"])["env_kwargs"]
+    assert "scenario" not in kwargs and kwargs["skill"] == "my_skill"
+
+
+def test_read_orders_demos_by_number_and_names_what_is_missing(tmp_path):
+    from drake_skill.demos.robomimic import import_robomimic, read_robomimic
+
+    path, demos = _export(tmp_path, [make_demo(i, perception=False) for i in range(3)])
+    with h5py.File(path, "a") as f:
+        f["data"].move("demo_2", "demo_10")
+        f.create_group("data/mask")                           # robomimic's filter keys: not a demo
+        f.create_group("data/demo_x")
+    assert [d.seed for d in read_robomimic(str(path))] == [0, 1, 2]          # demo_10 after demo_1
+    paths, imported = import_robomimic(path, tmp_path / "back")
+    assert [p.name for p in paths] == ["demo_000.npz", "demo_001.npz", "demo_002.npz"]
+    assert imported[0].path == f"{path}:/data/demo_0"
+    with pytest.raises(FileNotFoundError) as e:
+        read_robomimic(tmp_path / "none.hdf5")
+    assert str(e.value) == f"{tmp_path / 'none.hdf5'}: no such file"
+
+    def damaged(edit):
+        target = tmp_path / "damaged.hdf5"
+        target.write_bytes(path.read_bytes())
+        with h5py.File(target, "a") as f:
+            edit(f)
+        with pytest.raises(DemonstrationError) as e:
+            read_robomimic(target)
+        return str(e.value).replace(str(target), "F")
+
+    assert damaged(lambda f: [f["data"].pop(n) for n in list(f["data"])]) == (
+        "F: 'data' has no demo_N groups; nothing to import: export a folder that holds demonstrations "
+        "('drake-skill demos list DIR' shows them)")
+    assert damaged(lambda f: f["data/demo_1/drake_skill"].attrs.pop("seed")) == \
+        "F:/data/demo_1/drake_skill: attribute 'seed' is missing"
+    assert damaged(lambda f: f["data/demo_0/drake_skill"].attrs.__setitem__("metadata", "{x")).startswith(
+        "F:/data/demo_0/drake_skill: attribute 'metadata' is not JSON (")
+    assert damaged(lambda f: f["data/demo_0/drake_skill"].pop("q_100hz")) == (
+        "F:/data/demo_0: '/data/demo_0/drake_skill/q_100hz' is missing; not a dataset written by "
+        "'drake-skill demos export --format robomimic'")
+    assert damaged(lambda f: f["data/demo_0/obs"].pop("hand_pose")) == (
+        "F:/data/demo_0: '/data/demo_0/obs/hand_pose' is missing; not a dataset written by "
+        "'drake-skill demos export --format robomimic'")
+    assert damaged(lambda f: f["data/demo_0"].pop("obs")) == (
+        "F:/data/demo_0: '/data/demo_0/hand_pose' is missing; not a dataset written by "
+        "'drake-skill demos export --format robomimic'")
+    # A demonstration the file holds but that is invalid is named by its place in the file.
+    assert damaged(lambda f: f["data/demo_1/drake_skill"].attrs.__setitem__("skill", "")).startswith(
+        "F:/data/demo_1")
+
+
+def test_read_of_perception_and_damaged_bytes(tmp_path):
+    from drake_skill.demos.robomimic import read_robomimic
+
+    path, demos = _export(tmp_path, [make_demo(0)])
+    back, = read_robomimic(path)
+    _assert_same(demos[0], back)
+    target = tmp_path / "damaged.hdf5"
+    target.write_bytes(path.read_bytes())
+    with h5py.File(target, "a") as f:
+        f["data/demo_0/drake_skill"].pop("X_WO_start")
+    with pytest.raises(DemonstrationError, match="drake_skill/X_WO_start' is missing"):
+        read_robomimic(target)
+    target.write_bytes(path.read_bytes())
+    with h5py.File(target, "a") as f:                 # a value h5py reads but that is no number
+        f["data/demo_0/drake_skill"].attrs["final_object_state"] = "abc"
+    with pytest.raises(ValueError) as e:
+        read_robomimic(target)
+    assert str(e.value) == (f"{target}: damaged HDF5 (ValueError: could not convert string to float: 'abc'); "
+                            "export it again with 'drake-skill demos export DIR OUT.hdf5'")

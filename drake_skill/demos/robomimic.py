@@ -186,10 +186,11 @@ def _read_demos(f, path: Path) -> list[Demonstration]:
                                      "'drake-skill demos export' can be imported (they carry the 100 Hz data)")
         raw = g["drake_skill"]
         obs = g["obs"] if "obs" in g else {}
-        try:
-            attrs = {k: raw.attrs[k] for k in ("skill", "seed", "success", "final_object_state", "metadata")}
-        except KeyError as e:
-            raise DemonstrationError(f"{where}/drake_skill: attribute {e} is missing") from e
+        names = ("skill", "seed", "success", "final_object_state", "metadata")
+        missing = [k for k in names if k not in raw.attrs]
+        if missing:     # (h5py's KeyError names no attribute: "Unable to ... open attribute (...)")
+            raise DemonstrationError(f"{where}/drake_skill: attribute {missing[0]!r} is missing")
+        attrs = {k: raw.attrs[k] for k in names}
         try:
             metadata = json.loads(attrs["metadata"])
         except (TypeError, json.JSONDecodeError) as e:
