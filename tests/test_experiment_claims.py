@@ -80,3 +80,247 @@ def test_the_spread_test_is_brown_forsythe_not_levene_s_mean_centred_one():
     assert p == pytest.approx(0.0913, abs=1e-4)
     verdict, text = compare_spread(a, b)
     assert verdict == "unclear" and f"Brown-Forsythe p = {p:.3f}" in text
+
+
+
+# ----------------------------------------------------------------------------- cells, results.md and figures
+def _row(skill, method, reward, run, episode, used, success, after=None, before=None):
+    return {"skill": skill, "method": method, "reward": reward, "run": run, "episode": episode,
+            "rollouts_used": used, "success": success, "return": 0.0, "held_out_after": after,
+            "held_out_before": before}
+
+
+def _rows():
+    """C = 4 rollouts per episode (PI^2's rows); PoWER's every rollout, of which every 4th counts; a PI^2
+    sparse run with a gap (left out); a PI^2 dense cell one episode shorter; a skill of one run."""
+    rows = []
+    for run, curve, after in ((0, [0, 1, 1], 0.8), (1, [0, 0, 1], None), (2, [1, 1, 1], 1.0)):
+        rows += [_row("open", "pi2", "sparse", run, e, 4 * e, s, after, 0.25) for e, s in enumerate(curve)
+                 if not (run == 2 and e == 1)]
+    for run in (0, 1):
+        rows += [_row("open", "power", "dense", run, k, k, int(k >= 4 + run), 0.5, 0.25) for k in range(9)]
+    rows.append(_row("close", "pi2", "dense", 0, 0, 0, 1))
+    rows += [_row("open", "pi2", "dense", 0, e, 4 * e, s, 0.9, 0.25) for e, s in enumerate([1, 1])]
+    rows += [_row("open", "pi2", "dense", 1, e, 4 * e, s, 0.7, 0.25) for e, s in enumerate([0, 1])]
+    return rows
+
+
+EXPECTED_MD = "\n".join([
+    '# Experiment results',
+    '',
+    "From `t.csv` alone (17 greedy executions of 7 runs). Greedy success is the simulator's ground truth; e0 is before learning, ek after k episodes (PoWER: after k x C rollouts). AUC: area under a run's greedy success against episode over E; mean ± sd over runs. Held-out after: success over the held-out poses after learning, mean ± sd over runs.",
+    '',
+    '## close',
+    '',
+    'Held-out success before learning (the fitted skill, once): -',
+    '',
+    '| method | reward | runs | e0 | AUC | held-out after |',
+    '|---|---|---:|---:|---:|---:|',
+    '| pi2 | dense | 1 | 1.00 | 1.00 ± 0.00 | - |',
+    '',
+    '![close: per method](./close_methods.png)',
+    '',
+    '![close: dense reward](./close_dense.png)',
+    '',
+    '## open',
+    '',
+    'Held-out success before learning (the fitted skill, once): 0.25',
+    '',
+    '| method | reward | runs | e0 | e1 | e2 | AUC | held-out after |',
+    '|---|---|---:|---:|---:|---:|---:|---:|',
+    '| power | dense | 2 | 0.00 | 0.50 | 1.00 | 0.50 ± 0.35 | 0.50 ± 0.00 |',
+    '| pi2 | dense | 2 | 0.50 | 1.00 |  | 0.75 ± 0.35 | 0.80 ± 0.14 |',
+    '| pi2 | sparse | 2 | 0.00 | 0.50 | 1.00 | 0.50 ± 0.35 | 0.80 ± 0.00 |',
+    '',
+    '![open: per method](./open_methods.png)',
+    '',
+    '![open: dense reward](./open_dense.png)',
+    '',
+    "## The thesis's claims (section 7.1)",
+    '',
+    'Better/worse: the 95 % Welch interval of the difference of means lies above/below 0; a lower spread: the smaller sd with Brown-Forsythe p < 0.05. A claim holds when every comparison is better, does not hold when one is worse, and cannot tell otherwise. Reported, not tested.',
+    '',
+    '1. Learned dense rewards beat sparse ones for every method but PoWER. **cannot tell**',
+    '',
+    '   - open, pi2: AUC dense vs sparse 0.75 ± 0.35 vs 0.50 ± 0.35, difference +0.25 [-1.27, +1.77]: unclear',
+    '',
+    '2. The black-box variants (PI^2-ES, PI^2-ES-Cov) beat the per-step ones (PI^2, PI^2-Cov). **cannot tell**',
+    '',
+    '   - no cells to compare in this table',
+    '',
+    '3. PI^2-ES-Cov converges fastest, highest and with the lowest variance. **cannot tell**',
+    '',
+    '   - no cells to compare in this table',
+    "",
+])
+
+
+def test_cells_from_rows_by_hand():
+    from drake_skill.experiments.report import _episode_length, cells_from_rows
+
+    assert _episode_length(_rows()) == 4
+    assert _episode_length([_row("open", "power", "dense", 0, 3, 3, 0)]) == 1
+    assert _episode_length([_row("open", "pi2", "dense", 0, 0, 0, 0)]) == 1
+    cells = cells_from_rows(_rows())
+    assert [(c.skill, c.method, c.reward, c.runs) for c in cells] == [
+        ("close", "pi2", "dense", [0]), ("open", "power", "dense", [0, 1]), ("open", "pi2", "dense", [0, 1]),
+        ("open", "pi2", "sparse", [0, 1])]
+    np.testing.assert_array_equal(cells[1].success, [[0, 1, 1], [0, 0, 1]])      # rollouts 0, 4, 8
+    np.testing.assert_array_equal(cells[3].success, [[0, 1, 1], [0, 0, 1]])
+    assert cells[3].held_out_after == [0.8, None] and cells[3].held_out_before == 0.25
+    assert cells[0].held_out_after == [None] and cells[0].held_out_before is None
+    np.testing.assert_array_equal(cells[3].after, [0.8])
+    assert cells[3].after.dtype == float and cells[0].after.shape == (0,)
+    np.testing.assert_array_equal(cells[2].auc, [1.0, 0.5])
+    np.testing.assert_array_equal(cells[1].auc, [0.75, 0.25])             # (0 + 2 * 1 + 1) / 4, (0 + 0 + 1) / 4
+    assert cells[0].auc.tolist() == [1.0] and cells[0].auc.dtype == float  # one episode: its success
+    # A cell whose every run has a gap is left out.
+    gappy = [_row("open", "pi2", "dense", 0, e, 4 * e, 1) for e in (0, 2)]
+    assert cells_from_rows(gappy + [_row("open", "pi2", "dense", 1, 1, 4, 1)]) == []
+
+
+def test_mean_and_sd_text():
+    from drake_skill.experiments.report import _mean_sd, _ms
+
+    assert _mean_sd([]) == (pytest.approx(float("nan"), nan_ok=True), pytest.approx(float("nan"), nan_ok=True))
+    assert _mean_sd([0.5]) == (0.5, 0.0)
+    assert _mean_sd([1, 2, 4]) == (pytest.approx(7 / 3), pytest.approx(np.std([1, 2, 4], ddof=1)))
+    assert (_ms([]), _ms([0.5]), _ms([1, 2, 4]), _ms([1, 2, 4], 3)) == ("-", "0.50 ± 0.00", "2.33 ± 1.53",
+                                                                         "2.333 ± 1.528")
+
+
+def test_compare_edges():
+    assert compare([0.5, 0.5], [0.5]) == ("unclear", "0.50 ± 0.00 vs 0.50 ± 0.00 (fewer than 2 runs)")
+    # One sample without spread: the other's gives the interval (no warning escapes).
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        verdict, text = compare([1.0, 1.0, 1.0], [0.2, 0.4, 0.3])
+    assert verdict == "better" and text == "1.00 ± 0.00 vs 0.30 ± 0.10, difference +0.70 [+0.45, +0.95]"
+    assert compare_spread([0.5, 0.6], [0.5, 0.6]) == ("unclear", "sd 0.07 vs 0.07")
+    assert compare_spread([0.5], [0.5, 0.9]) == ("unclear", "sd 0.00 vs 0.28 (fewer than 2 runs)")
+    assert compare_spread([0.5, 0.9], [0.1]) == ("unclear", "sd 0.28 vs 0.00 (fewer than 2 runs)")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert compare_spread([1.0] * 6, [0.0, 1.0] * 3) == ("better", "sd 0.00 vs 0.55, Brown-Forsythe p = 0.000")
+        assert compare_spread([0.3] * 3, [0.3] * 3) == ("unclear", "sd 0.00 vs 0.00")
+
+
+def test_claims_skip_what_they_cannot_compare():
+    from drake_skill.experiments.report import claim_black_box_beats_per_step, claim_leader
+
+    alone = [_cell("pi2-es-cov", "dense", [ALWAYS] * 3)]
+    assert claim_leader(alone) == ("cannot tell", [])
+    assert claim_black_box_beats_per_step(alone) == ("cannot tell", [])
+    one_reward = [_cell("pi2-es", "dense", [ALWAYS] * 3), _cell("pi2", "dense", [ZERO] * 3)]
+    verdict, lines = claim_black_box_beats_per_step(one_reward)
+    assert verdict == "holds" and lines == [
+        "close, dense: AUC pi2-es vs pi2 1.00 ± 0.00 vs 0.00 ± 0.00, difference +1.00 [+1.00, +1.00]: better"]
+    # The leader against the best other by mean for speed and height, by the lowest sd for spread.
+    cells = [_cell("pi2-es-cov", "dense", [ALWAYS] * 4, [1.0] * 4), _cell("pi2", "dense", [MID] * 4, [0.2] * 4),
+             _cell("cma-es", "dense", [EARLY, EARLY, EARLY, LATE], [0.6, 0.4] * 2), _cell("power", "sparse", [ALWAYS] * 4)]
+    verdict, lines = claim_leader(cells)
+    assert [line.split(": ")[1].split(",")[1] for line in lines] == [" cma-es", " cma-es", " pi2"]
+    assert lines[2].startswith("close, lowest variance (sd of AUC): pi2-es-cov vs the best other, pi2: sd 0.00 vs "
+                               "0.00")
+
+
+def test_results_markdown_in_full():
+    from drake_skill.experiments.report import cells_from_rows, results_markdown
+
+    cells = cells_from_rows(_rows())
+    assert results_markdown(cells, "t.csv") == EXPECTED_MD
+    with_notes = results_markdown(cells, "t.csv", "\n  Found: x.  \n\n")
+    assert with_notes == EXPECTED_MD + "\n## Notes (`notes.md`, written by hand beside the table)\n\nFound: x.\n"
+
+
+def test_write_report_files_and_errors(tmp_path):
+    from drake_skill.experiments.report import results_markdown, cells_from_rows, write_report
+    from drake_skill.experiments.table import table_text
+
+    grid = tmp_path / "grid"
+    grid.mkdir()
+    (grid / "table.csv").write_text(table_text(_rows()))
+    written = write_report(grid)
+    assert [p.name for p in written] == ["close_methods.png", "close_dense.png", "open_methods.png",
+                                         "open_dense.png", "results.md"]
+    assert all(p.parent == grid and p.is_file() for p in written)
+    assert (grid / "results.md").read_text(encoding="utf-8") == EXPECTED_MD.replace("`t.csv`", "`table.csv`")
+    (grid / "notes.md").write_text("Seen.\n", encoding="utf-8")
+    out = tmp_path / "out"
+    out.mkdir()
+    written = write_report(grid / "table.csv", out)
+    assert all(p.parent == out for p in written)
+    assert (out / "results.md").read_text(encoding="utf-8") == results_markdown(cells_from_rows(_rows()),
+                                                                                 "table.csv", "Seen.\n")
+    (grid / "empty.csv").write_text(table_text([]))
+    with pytest.raises(ValueError) as e:
+        write_report(grid / "empty.csv")
+    assert str(e.value) == f"{grid / 'empty.csv'}: no runs in the table; run 'drake-skill experiment run' first"
+
+
+def test_figures_draw_the_bands_of_every_cell(monkeypatch):
+    from matplotlib.colors import to_rgba
+
+    from drake_skill.experiments import report
+
+    saved = []
+    monkeypatch.setattr(report, "_save", lambda fig, path: saved.append((fig, path)) or path)
+    cells = report.cells_from_rows(_rows())
+    assert report.plot_methods(cells, "open", "m.png") == "m.png"
+    fig, _ = saved.pop()
+    assert tuple(fig.get_size_inches()) == pytest.approx((8.4, 3.2))       # 2 methods: 1 x 2 panels
+    power, pi2 = fig.axes
+    assert (power.get_title(), pi2.get_title()) == ("power", "pi2")
+    assert fig._suptitle.get_text() == "open: greedy success per method, dense against sparse reward"
+    assert power.get_ylabel() == "greedy success (mean ± sd)" and pi2.get_ylabel() == ""
+    for ax in (power, pi2):
+        assert ax.get_ylim() == pytest.approx((-0.05, 1.05)) and ax.get_xlabel() == "episode"
+        assert ax.title.get_fontsize() == 10 and ax.get_legend()._loc == 4        # lower right
+        assert ax.get_legend().get_texts()[0].get_fontsize() == 7
+    dense, sparse = pi2.get_lines()
+    assert (dense.get_label(), sparse.get_label()) == ("dense (2 runs)", "sparse (2 runs)")
+    assert (dense.get_linestyle(), sparse.get_linestyle()) == ("-", "--")
+    assert to_rgba(dense.get_color()) == to_rgba("tab:blue") and to_rgba(sparse.get_color()) == to_rgba("tab:orange")
+    assert dense.get_marker() == "o" and dense.get_markersize() == 3
+    np.testing.assert_array_equal(dense.get_xdata(), [0, 1])
+    np.testing.assert_array_equal(dense.get_ydata(), [0.5, 1.0])
+    band = pi2.collections[0]
+    assert band.get_alpha() == 0.18 and tuple(band.get_facecolor()[0][:3]) == to_rgba("tab:blue")[:3]
+    assert band.get_linewidth()[0] == 0
+    # The band: mean -/+ the sd over runs (ddof 1), clipped to [0, 1].
+    sd = np.std([[1, 1], [0, 1]], axis=0, ddof=1)
+    vertices = band.get_paths()[0].vertices
+    np.testing.assert_allclose(sorted(set(vertices[:, 1].round(12))),
+                               sorted(set(np.r_[np.clip([0.5, 1.0] - sd, 0, 1), np.clip([0.5, 1.0] + sd, 0, 1)].round(12))))
+    # Four methods: 2 x 3 panels, the last two off.
+    four = [report.Cell("s", m, "dense", [0], np.array([[0, 1]]), [None], None) for m in ("a", "b", "c", "d")]
+    report.plot_methods(four, "s", "x.png")
+    fig, _ = saved.pop()
+    assert tuple(fig.get_size_inches()) == pytest.approx((12.6, 6.4)) and len(fig.axes) == 6
+    assert [ax.axison for ax in fig.axes] == [True] * 4 + [False] * 2
+    one = fig.axes[0].get_lines()[0]
+    np.testing.assert_array_equal(one.get_ydata(), [0, 1])
+    assert fig.axes[0].collections[0].get_paths()[0].vertices[:, 1].tolist().count(0.0) >= 1   # sd 0 with one run
+    assert report.plot_dense(cells, "open", "d.png") == "d.png"
+    fig, _ = saved.pop()
+    assert tuple(fig.get_size_inches()) == pytest.approx((6.4, 4.2)) and len(fig.axes) == 1
+    ax = fig.axes[0]
+    assert [line.get_label() for line in ax.get_lines()] == ["power (2 runs)", "pi2 (2 runs)"]
+    assert [to_rgba(line.get_color()) for line in ax.get_lines()] == [to_rgba("C0"), to_rgba("C1")]
+    assert [c.get_alpha() for c in ax.collections] == [0.08, 0.08]
+    assert ax.get_title() == "open: every method, dense reward" and ax.get_ylabel() == "greedy success (mean ± sd)"
+
+
+def test_figures_are_pngs_of_their_size_without_a_software_tag(tmp_path):
+    from drake_skill.experiments import report
+    from drake_skill.fileio import new_figure
+
+    fig = new_figure((6.4, 4.2))
+    fig.subplots().plot([0, 1], [0, 1])
+    path = report._save(fig, tmp_path / "f.png")
+    data = path.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")) == (640, 420)
+    assert b"Software" not in data
