@@ -111,8 +111,8 @@ def test_a_directive_naming_no_frame_or_model_is_named_by_its_index(child, expec
 
 
 @pytest.mark.parametrize("edit, expected", [
-    (("panda::panda_link0", "panda::panda_linkX"), "directives[1] (add_weld {parent: world, child: panda::panda_linkX}): "
-                                                   "no frame 'panda_linkX' in model 'panda'"),
+    (("panda::panda_link0", "panda::panda_linkX"),
+     "directives[1] (add_weld {parent: world, child: panda::panda_linkX}): no frame 'panda_linkX' in model 'panda'"),
     (("package://drake_skill_models/drawer.sdf", "broken.sdf"), "directives[6] (add_model {name: drawer, file: file://"),
 ])
 def test_a_scenario_file_with_a_bad_directive_is_one_line_naming_the_file(tmp_path, capsys, edit, expected):

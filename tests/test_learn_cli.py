@@ -272,3 +272,55 @@ def test_best_return_starts_from_the_demonstration_the_learned_reward_rates_best
     assert save_fitted_skill(kept, tmp_path / "random", station_config=shared["station"], log=lines.append) is kept
     assert apply_initial_rule(tmp_path / "random", station_config=shared["station"], progress=False) is None
     assert Skill.load(tmp_path / "random").initial_index == 1
+
+
+def test_every_rollout_is_kept_and_a_reflex_trip_replays_with_its_contacts(learned, capsys, tmp_path):
+    """Issue 51 item 3: every rollout keeps its weights, seed, path and last frame; a stopped one also its
+    joints and a frame a second up to the stop; ``drake-skill replay`` re-simulates one from its weights
+    and seed, names the bodies in contact and follows the stored path."""
+    from drake_skill.learning.rollout_store import load_rollout, rollouts_path, stored_names
+
+    _, out, _ = learned
+    assert stored_names(out) == ["episode_001", "greedy_000", "greedy_001", "held_out_after", "held_out_before",
+                                 "select"]
+    records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
+    rollout = [r for r in records if r["type"] == "rollout"][0]
+    kept = load_rollout(rollouts_path(out, "episode_001"), 0)
+    assert kept["seed"] == rollout["seed"] and kept["meta"]["n"] == 2 and rollout["reason"] == "reflex"
+    stop = rollout["contact"]["t"]
+    # Stopped early: the path, joints and object state up to the stop, a frame a second from t = 0.
+    assert kept["times"][-1] <= stop + 0.1 and len(kept["joints"]) == len(kept["times"]) == len(kept["ee_pose"])
+    assert list(kept["frame_times"]) == list(range(len(kept["frame_times"]))) and kept["frame_times"][-1] <= stop
+    assert kept["frames"].dtype == np.uint8 and kept["frames"].shape[1:] == kept["last_frame"].shape
+    assert kept["frames"].shape[0] == int(stop) + 1 and kept["last_frame"].shape[2] == 3
+    greedy = load_rollout(rollouts_path(out, "greedy_000"), 0)    # ran to its end: no frames
+    assert "frames" not in greedy and greedy["last_frame"].std() > 0 and greedy["times"][-1] > stop
+    with pytest.raises(ValueError, match=r"no rollout 2; it holds 2 \(indices 0..1\)"):
+        load_rollout(rollouts_path(out, "episode_001"), 2)
+
+    page = tmp_path / "trip.html"
+    assert main(["replay", str(out), "--episode", "1", "--index", "0", "--out", str(page)]) == 0
+    printed = capsys.readouterr().out
+    assert f"episode_001 rollout 0 (seed {rollout['seed']}): wrote {page}" in printed
+    assert "re-simulated: failed (reflex" in printed and "hand path as stored: yes" in printed
+    pairs = "; ".join(f"{a} - {b} {f:.0f} N" for a, b, f in rollout["contact"]["pairs"])
+    assert f"contact at t = {stop} s ({rollout['contact']['cause']}): {pairs}" in printed
+    assert b"/drake/contact_forces" in _meshcat_messages(page.read_text())    # the forces are drawn
+    assert main(["replay", str(out), "--greedy", "3"]) == 2
+    assert "no kept rollouts 'greedy_003' (rollouts/greedy_003.npz); it has episode_001, greedy_000" in \
+        capsys.readouterr().err
+
+
+def _meshcat_messages(html: str) -> bytes:
+    """The bytes of every base64 run of a Meshcat page (its recorded messages are msgpack in base64)."""
+    import base64
+    import binascii
+    import re
+
+    out = []
+    for run in re.findall(r"[A-Za-z0-9+/]{16,}={0,2}", html):
+        try:
+            out.append(base64.b64decode(run + "=" * (-len(run) % 4)))
+        except binascii.Error:
+            continue
+    return b"".join(out)

@@ -19,14 +19,18 @@ JSON to ``--out`` (default ``DIR/evaluation.json``; per rollout its seed,
 object placement, outcome and failure reason); ``--json`` prints that JSON
 object instead of the table. Beside it, the same name with ``.png``: where
 on the table each policy succeeded and failed (one panel per DMP), which
-shows the band of object placements a plain imitation succeeds in.
+shows the band of object placements a plain imitation succeeds in. In the
+report's folder, ``rollouts/evaluation_dmp_I.npz`` keeps each rollout's
+weights, seed, path and last camera frame (a failed one's frames up to its
+stop): ``drake-skill replay FOLDER --evaluation I --index C`` replays one.
 
 With ``--explore N`` it runs instead the N exploratory rollouts policy
 search's first episode would run (weights sampled from N(W_0, Sigma_b^0),
 seeded by --seed0, one pose each) and reports the spread of their learned
 returns, their successes and final object states (default out
 ``DIR/exploration.json``, and ``exploration.png``): whether the learned
-reward gives policy search something to climb.
+reward gives policy search something to climb (rollouts kept in
+``rollouts/exploration.npz``; ``drake-skill replay FOLDER --exploration --index C``).
 """
 
 from __future__ import annotations
@@ -107,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
         report = explore_skill(args.skill_dir, rollouts=args.explore, seed0=args.seed0, station_config=station,
                                rollout_config=rollout_config, workers=args.workers,
                                ray_address=args.ray_address, progress=not (args.quiet or args.json),
-                               exploration_scale=args.exploration_scale)
+                               exploration_scale=args.exploration_scale, keep=_keep_dir(args, "exploration.json"))
         out = args.out if args.out is not None else args.skill_dir / "exploration.json"
         atomic_write_json(out, report)
         plot = plot_outcomes_by_placement(report, _plot_path(out))
@@ -118,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
     report = evaluate_skill(
         args.skill_dir, poses=args.poses, seed0=args.seed0, station_config=station,
         rollout_config=rollout_config, workers=args.workers, ray_address=args.ray_address, all_demos=args.all_demos,
-        progress=not (args.quiet or args.json))
+        progress=not (args.quiet or args.json), keep=_keep_dir(args, "evaluation.json"))
     out = args.out if args.out is not None else args.skill_dir / "evaluation.json"
     atomic_write_json(out, report)
     plot = plot_outcomes_by_placement(report, _plot_path(out))
@@ -128,6 +132,12 @@ def run(args: argparse.Namespace) -> int:
         print(evaluation_table(report))
         print(f"wrote {out} and {plot}")
     return 0
+
+
+def _keep_dir(args, default_name: str) -> Path:
+    """The folder of the JSON report (``--out`` or the skill's): its ``rollouts/`` keeps the rollouts
+    (``drake-skill replay FOLDER --evaluation I --index C`` shows one)."""
+    return (args.out if args.out is not None else args.skill_dir / default_name).parent
 
 
 def _plot_path(out: Path) -> Path:

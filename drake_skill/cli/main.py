@@ -35,7 +35,7 @@ import yaml
 from drake_skill.common import IkWarningCounter
 
 #: Command modules in the order ``--help`` lists them (missing ones are skipped).
-COMMANDS = ["skills", "station_demo", "demos", "fit", "learn", "evaluate", "experiment", "bench", "hardware",
+COMMANDS = ["skills", "station_demo", "demos", "fit", "learn", "evaluate", "replay", "experiment", "bench", "hardware",
             "sim_robot"]
 
 DESCRIPTION = "Robot skill learning from very few demonstrations, as a Drake diagram."

@@ -18,7 +18,7 @@ import numpy as np
 
 from drake_skill.demos.format import Demonstration
 
-__all__ = ["replay_html", "write_replay"]
+__all__ = ["joints_replay_html", "replay_html", "write_replay"]
 
 #: Meshcat's recording rate (frames per second); the 100 Hz samples are thinned to about it.
 FPS = 32.0
@@ -30,6 +30,20 @@ def replay_html(demo: Demonstration, station_config=None, meshcat=None) -> str:
     station_config: the scenario (default: the skill's shipped one); meshcat:
     a Meshcat to record in (default: a new one, closed when this returns).
     """
+    from drake_skill.skills import scenario_for_skill
+
+    config = station_config if station_config is not None else scenario_for_skill(demo.skill)
+    return joints_replay_html(config, demo.X_WO_true, demo.times_100hz - demo.times_100hz[0], demo.q_100hz,
+                              demo.gripper_100hz, demo.object_state_100hz, meshcat)
+
+
+def joints_replay_html(config, X_WO_true, times, q, gripper, object_state, meshcat=None) -> str:
+    """The standalone Meshcat HTML of recorded joints on ``config``'s scenario plant (module docstring).
+
+    X_WO_true: (7,) the object's pose (xyz m + wxyz); times (N,) [s]; q (N, 7) arm joint
+    positions [rad]; gripper (N,) or a number: the finger opening [m]; object_state (N,)
+    the object joint [rad or m]. meshcat: as :func:`replay_html`'s.
+    """
     from pydrake.common.eigen_geometry import Quaternion
     from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
     from pydrake.math import RigidTransform
@@ -37,9 +51,9 @@ def replay_html(demo: Demonstration, station_config=None, meshcat=None) -> str:
 
     from drake_skill.common import frame_meshcat_camera
     from drake_skill.station.sim.builder import add_scene_plant
-    from drake_skill.skills import scenario_for_skill
 
-    config = station_config if station_config is not None else scenario_for_skill(demo.skill)
+    times = np.asarray(times, dtype=float)
+    gripper = np.broadcast_to(np.asarray(gripper, dtype=float), times.shape)
     meshcat = meshcat if meshcat is not None else Meshcat()
     builder = DiagramBuilder()
     scene = add_scene_plant(builder, config)
@@ -48,22 +62,22 @@ def replay_html(demo: Demonstration, station_config=None, meshcat=None) -> str:
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     plant, plant_context = scene.plant, scene.plant.GetMyMutableContextFromRoot(context)
-    v = np.asarray(demo.X_WO_true, dtype=float)
+    v = np.asarray(X_WO_true, dtype=float)
     X_WO = RigidTransform(Quaternion(v[3:] / np.linalg.norm(v[3:])), v[:3])
     plant.SetFreeBodyPose(plant_context, scene.object_base, X_WO)
     joint_index = scene.object_joint.position_start()     # the lid's hinge or the drawer's slide
     frame_meshcat_camera(meshcat, X_WO.translation())
-    step = max(1, int(round(1.0 / (FPS * float(np.median(np.diff(demo.times_100hz)))))))
-    samples = np.unique(np.append(np.arange(0, demo.times_100hz.size, step), demo.times_100hz.size - 1))
+    step = max(1, int(round(1.0 / (FPS * float(np.median(np.diff(times))))))) if times.size > 1 else 1
+    samples = np.unique(np.append(np.arange(0, times.size, step), times.size - 1))
     meshcat.StartRecording(frames_per_second=FPS, set_visualizations_while_recording=False)
     try:
         for k in samples:
-            context.SetTime(float(demo.times_100hz[k] - demo.times_100hz[0]))
-            plant.SetPositions(plant_context, scene.panda, demo.q_100hz[k])
-            plant.SetPositions(plant_context, scene.hand, np.full(2, 0.5 * demo.gripper_100hz[k]))
-            q = plant.GetPositions(plant_context)
-            q[joint_index] = demo.object_state_100hz[k]
-            plant.SetPositions(plant_context, q)
+            context.SetTime(float(times[k]))
+            plant.SetPositions(plant_context, scene.panda, q[k])
+            plant.SetPositions(plant_context, scene.hand, np.full(2, 0.5 * gripper[k]))
+            positions = plant.GetPositions(plant_context)
+            positions[joint_index] = object_state[k]
+            plant.SetPositions(plant_context, positions)
             diagram.ForcedPublish(context)
     finally:
         meshcat.StopRecording()

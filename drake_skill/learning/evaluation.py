@@ -84,7 +84,7 @@ def _placement(result) -> list[float] | None:
 
 def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, station_config=None,
                    rollout_config=None, workers: int = 1, ray_address: str | None = None,
-                   all_demos: bool = False, progress: bool = True) -> dict[str, Any]:
+                   all_demos: bool = False, progress: bool = True, keep: Path | None = None) -> dict[str, Any]:
     """Greedy success of a skill (initial or learned) over ``poses`` held-out object poses.
 
     Executes the skill's policy (its initial DMP, the learned one in a skill
@@ -93,6 +93,8 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
     on the poses of seeds ``seed0 .. seed0 + poses - 1`` and judges each from
     the simulator's ground truth. Returns a JSON-able report: per policy
     (key = DMP index) the :func:`evaluate_greedy` report, plus the settings.
+    With ``keep`` (a folder), each policy's rollouts are kept in
+    ``keep/rollouts/evaluation_dmp_I.npz`` (:mod:`~drake_skill.learning.rollout_store`).
     """
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec, make_pool
@@ -120,16 +122,32 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
                    leave=False, file=sys.stderr)
         try:
             with make_pool(spec, workers, ray_address) as pool:
-                policy, _ = evaluate_greedy(pool, skill.dmps[index].weights, seeds,
-                                            lambda i, r, bar=bar: bar.update(1))
+                policy, results = evaluate_greedy(pool, skill.dmps[index].weights, seeds,
+                                                  lambda i, r, bar=bar: bar.update(1))
         finally:
             bar.close()
+        if keep is not None:
+            _keep_rollouts(keep, f"evaluation_dmp_{index}", results, skill_dir, station_config, rollout_config,
+                           index)
         policy["initial"] = index == skill.initial_index
         report["policies"][str(index)] = policy
     report["success_rate"] = report["policies"][str(skill.initial_index)]["success_rate"] \
         if str(skill.initial_index) in report["policies"] else None
     report["wall_s"] = round(time.perf_counter() - start, 1)
     return report
+
+
+def _keep_rollouts(folder, name, results, skill_dir, station_config, rollout_config, dmp_index) -> None:
+    """``folder/rollouts/NAME.npz`` with what a replay builds its runner from."""
+    import dataclasses as dc
+
+    from pydrake.common.yaml import yaml_dump_typed
+
+    from drake_skill.learning.rollout_store import rollouts_path, save_rollouts
+
+    save_rollouts(rollouts_path(folder, name), results,
+                  {"skill_dir": str(Path(skill_dir).resolve()), "station": yaml_dump_typed(station_config),
+                   "rollout": dc.asdict(rollout_config), "dmp_index": dmp_index})
 
 
 def best_return_index(mean_returns, default: int) -> int:
@@ -216,7 +234,8 @@ def save_fitted_skill(skill, skill_dir, *, overwrite: bool = False, station_conf
 
 def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0, station_config=None,
                   rollout_config=None, workers: int = 1, ray_address: str | None = None,
-                  progress: bool = True, exploration_scale: float | None = None) -> dict[str, Any]:
+                  progress: bool = True, exploration_scale: float | None = None,
+                  keep: Path | None = None) -> dict[str, Any]:
     """Exploratory rollouts of a fitted skill: what the first episode of policy search sees.
 
     Draws ``rollouts`` weight samples ``W ~ N(W_0, exploration_scale * Sigma_b^0)`` per basis
@@ -225,7 +244,8 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     the pose of seed ``seed0 + i``. Returns a JSON-able report: the returns
     (learned dense reward; 0 for a failed rollout), their spread (min,
     median, max, standard deviation), ground-truth successes, final object
-    states and failures by reason.
+    states and failures by reason. With ``keep`` (a folder), the rollouts are kept in
+    ``keep/rollouts/exploration.npz``.
     """
     from drake_skill.learning.config import valid_exploration_scale
     from drake_skill.learning.policy_search import make_policy_search
@@ -255,6 +275,8 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
             results = pool.map([(w, s) for w, s in zip(samples, seeds)], lambda i, r: bar.update(1))
     finally:
         bar.close()
+    if keep is not None:
+        _keep_rollouts(keep, "exploration", results, skill_dir, station_config, rollout_config, None)
     report = {"skill": skill.name, "skill_dir": str(Path(skill_dir)), "object_pose": rollout_config.object_pose,
               "exploration_scale": float(exploration_scale), **results_report(seeds, results)}
     returns = np.array(report["returns"])

@@ -50,7 +50,10 @@ greedy-evaluated episode, appended as each is known; also the
 installed, the scalars in ``tensorboard/``; :mod:`~drake_skill.learning.runlog`),
 ``summary.json``, ``learning_curve.png``, ``skill/`` (the learned skill),
 ``replay_first.html`` / ``replay_last.html`` (Meshcat replays of the first
-and last greedy executions) and ``checkpoint/`` (``search.npz`` + ``state.json``:
+and last greedy executions), ``rollouts/`` (every rollout's weights, seed,
+path and last camera frame, and a failed one's frames up to its stop:
+:mod:`~drake_skill.learning.rollout_store`; ``drake-skill replay`` shows
+any of them) and ``checkpoint/`` (``search.npz`` + ``state.json``:
 the :class:`RunState`, written after every batch; :func:`learn` with
 ``resume=True`` continues from it to the result an uninterrupted run gives,
 and cuts the appended logs back to it first, so that they hold no record or
@@ -76,6 +79,7 @@ from drake_skill.fileio import atomic_write_json, atomic_write_text, load_json
 from drake_skill.learning import selection
 from drake_skill.learning.config import REWARDS, LearnConfig
 from drake_skill.learning.evaluation import HELD_OUT_SEED0, evaluate_greedy
+from drake_skill.learning.rollout_store import rollouts_path, save_rollouts
 from drake_skill.learning.exploration import SpanExploration
 from drake_skill.learning.plots import plot_learning_curve
 from drake_skill.learning.policy_search import PER_STEP_METHODS, make_policy_search
@@ -90,7 +94,7 @@ __all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "REWARDS", "LearnConfig", "LearnOutcom
 #: ``tensorboard`` package is installed).
 ARTIFACTS = ("config.json", "results.jsonl", "progress.csv", "summary.json", "learning_curve.png",
              "return_vs_state.png", "skill/",
-             "replay_first.html", "replay_last.html", "checkpoint/")
+             "replay_first.html", "replay_last.html", "rollouts/", "checkpoint/")
 
 
 def exploration_scales_text() -> str:
@@ -242,6 +246,8 @@ class LearningRun:
         for name in ("results.jsonl", "progress.csv", "summary.json", "learning_curve.png", "replay_first.html",
                      "replay_last.html"):
             (self.out_dir / name).unlink(missing_ok=True)
+        for stale in (self.out_dir / "rollouts").glob("*.npz"):
+            stale.unlink()
         atomic_write_json(self.out_dir / "config.json", {**self.run_config, "versions": software_versions()})
         config = self.config
         if self.span is not None:
@@ -401,6 +407,7 @@ class LearningRun:
         config, state = self.config, self.state
         n = len(batch.due)
         for p, result in zip(batch.due, results[:n]):
+            save_rollouts(rollouts_path(self.out_dir, f"greedy_{p['episode']:03d}"), [result])
             g = {"type": "greedy", "episode": p["episode"], **result.summary()}
             state.records.append(g)
             state.candidates[str(p["episode"])] = p["mean"]
@@ -414,6 +421,7 @@ class LearningRun:
         if batch.episode is None:
             return
         rollouts, episode, search = results[n:], batch.episode, state.search
+        save_rollouts(rollouts_path(self.out_dir, f"episode_{episode:03d}"), rollouts)
         search.tell(batch.samples, episode_rewards(rollouts, config.reward, config.method in PER_STEP_METHODS))
         returns = episode_rewards(rollouts, config.reward, False)
         for c, r in enumerate(rollouts):
@@ -439,7 +447,9 @@ class LearningRun:
         seeds = [selection.select_seed(config.seed, k) for k in range(int(config.select_poses))]
         episodes = sorted(means)
         tasks = [(means[e], s) for e in episodes for s in seeds]
-        results = iter(self._map(tasks, "selection"))
+        executed = list(self._map(tasks, "selection"))
+        save_rollouts(rollouts_path(self.out_dir, "select"), executed)
+        results = iter(executed)
         candidates = [selection.Candidate(e, [next(results).summary() for _ in seeds]) for e in episodes]
         chosen = selection.choose(candidates)
         record = {"type": "select", "rule": "guarded", "episode": chosen.episode, "seeds": seeds,
@@ -558,9 +568,10 @@ class LearningRun:
         b = self._bar(len(seeds), f"held-out poses ({phase})")
         weights = self.weights_of(self.state.search.mean) if weights is None else weights
         try:
-            report, _ = evaluate_greedy(self._pool, weights, seeds, lambda i, r: b.update(1))
+            report, results = evaluate_greedy(self._pool, weights, seeds, lambda i, r: b.update(1))
         finally:
             b.close()
+        save_rollouts(rollouts_path(self.out_dir, f"held_out_{phase}"), results)
         record = {"type": "held_out", "phase": phase, "episode": self.state.search.episode, **report}
         self.state.records.append(record)
         _print(f"held-out greedy success {phase} learning: {report['success_rate'] * 100:.0f} % of "

@@ -60,6 +60,7 @@ from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
 from drake_skill.station.sim.builder import Station, build_station
 from drake_skill.station.config import StationConfig
+from drake_skill.station.frames import add_camera_frames, downscale, frames_port_and_stride
 from drake_skill.station.records import StationLoggers
 from drake_skill.station.recording import advance_station, check_joint_state, pose_to_vector
 from drake_skill.station.success import judge_run
@@ -195,6 +196,12 @@ class RolloutResult:
     contact: a reflex trip's ``{"pairs": [[robot body, other body, force_N], ...],
     "point": [x, y, z], "t": s, "cause": "force" | "torque joint i"}`` (the contacts at
     the stop; pairs and point None on the robot); None otherwise.
+    weights: (B, 7) the DMP weights executed (what a replay re-simulates with ``seed``).
+    joints (N, 7) arm joint positions [rad] at ``times``: a rollout that failed keeps
+      these, ``times``, ``ee_pose`` and ``object_state`` up to its stop.
+    frame_times (K,) [s], frames (K, h, w, 3) uint8: the perception camera's image once a
+      second (:mod:`drake_skill.station.frames`), up to the stop; last_frame (h, w, 3): the
+      image at the end or the stop (empty without a camera).
     """
 
     seed: int
@@ -215,6 +222,11 @@ class RolloutResult:
     wall_s: float = 0.0
     ik_warnings: int = 0
     contact: dict | None = None
+    weights: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 7)))
+    joints: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 7)))
+    frame_times: np.ndarray = dc.field(default_factory=lambda: np.zeros(0))
+    frames: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 0, 0, 3), dtype=np.uint8))
+    last_frame: np.ndarray = dc.field(default_factory=lambda: np.zeros((0, 0, 3), dtype=np.uint8))
 
     @property
     def X_WO(self) -> RigidTransform:
@@ -339,6 +351,7 @@ class RolloutRunner:
             from drake_skill.perception.systems import add_object_segmenter
             self.segmenter = add_object_segmenter(builder, self.station)
         self.loggers = StationLoggers(builder, self.station, self.rollout_config.record_hz)
+        self.frames = add_camera_frames(builder, self.station) if station_config.enable_camera else None
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         self.simulator = Simulator(self.diagram, self.context)
@@ -376,6 +389,7 @@ class RolloutRunner:
         dmp_context = self._sub(self.dmp_system)
         self.diagram.SetDefaultContext(self.context)
         self.context.SetTime(0.0)
+        self.loggers.clear(self.context)      # before anything can fail: a failure reads what they hold
         self.dmp_system.set_weights(dmp_context, weights)
         X_WO_true = self.station.reset(self.context, seed)
         # The object frame from the first camera frame: the segmenter's outputs
@@ -389,7 +403,6 @@ class RolloutRunner:
         if np.dot(y0[3:], dmp.goal[3:]) < 0:   # same quaternion hemisphere as the goal
             y0[3:] *= -1
         self.dmp_system.set_start_goal(dmp_context, y0, dmp.goal)
-        self.loggers.clear(self.context)
         self.simulator.Initialize()           # latches X_WO into the DMP
         return X_WO
 
@@ -441,11 +454,35 @@ class RolloutRunner:
                                    message=f"{type(error).__name__}: {error}"[:500],
                                    object_pose=result.object_pose, object_pose_true=result.object_pose_true,
                                    contact=self._contact(error) if reason == "reflex" else None)
+            self._keep_until_stop(result)
         finally:
             logger.removeFilter(counter)
         result.wall_s = time.perf_counter() - start
         result.ik_warnings = counter.count
+        result.weights = weights.copy()
         return result
+
+    def _records(self):
+        """The loggers' samples on the ``record_hz`` grid up to where the run got."""
+        return self.loggers.read(self.context, int(np.ceil(self.duration() * self.rollout_config.record_hz - 1e-9)))
+
+    def _keep_until_stop(self, result: RolloutResult) -> None:
+        """A failed rollout's path, joints, object state and frames up to the stop (none where it
+        failed before simulating: the loggers were cleared at its reset)."""
+        try:
+            records = self._records()
+            result.times, result.ee_pose, result.object_state = records.times, records.ee_pose, records.object_state
+            result.joints = records.state[:, :7]
+            self._keep_frames(result)
+        except Exception:   # what is kept describes a failure; it never turns it into another one
+            pass
+
+    def _keep_frames(self, result: RolloutResult) -> None:
+        if self.frames is None:
+            return
+        result.frame_times, result.frames = self.frames.frames(self._sub(self.frames))
+        port, stride = frames_port_and_stride(self.station)
+        result.last_frame = downscale(port.Eval(self.station.GetMyContextFromRoot(self.context)), stride)
 
     def _contact(self, error) -> dict:
         """A reflex trip's ``{"pairs", "point", "t", "cause"}`` (the contacts at the stop; pairs and
@@ -469,7 +506,7 @@ class RolloutRunner:
         n = int(np.ceil(self.duration() * hz - 1e-9))
         # One advance over the whole rollout; the loggers in the diagram record it.
         advance_station(self.simulator, self.station, self.context, n / hz)
-        records = self.loggers.read(self.context, n)
+        records = self._records()
         for t, state in zip(records.times, records.state):
             check_joint_state(state, t)
         times, poses, objs = records.times, records.ee_pose, records.object_state
@@ -477,6 +514,8 @@ class RolloutRunner:
         success = judge_run(times, objs, records.contact_force, self.config.success)
         result.success, result.final_object_state = bool(success), final
         result.times, result.ee_pose, result.object_state = times, poses, objs
+        result.joints = records.state[:, :7]
+        self._keep_frames(result)
         if self.pipeline is not None:
             reward = self.pipeline.reward
             G = reward.goal_sequence(self.context)

@@ -179,7 +179,7 @@ def _worker_main(spec: RunnerSpec, connection) -> None:
             result = runner.run(weights, seed)
         except BaseException as error:  # a wrong task (shape); keep serving
             result = RolloutResult(seed=int(seed), failed=True, reason="error",
-                                   message=f"{type(error).__name__}: {error}"[:500])
+                                   message=f"{type(error).__name__}: {error}"[:500], weights=np.asarray(weights))
         connection.send(("result", (index, result)))
 
 
@@ -267,7 +267,8 @@ class ProcessPool(_Pool):
                     process = self._workers[slot][0]
                     process.join(timeout=5)
                     result = RolloutResult(seed=int(tasks[index][1]), failed=True, reason="error",
-                                           message=f"the worker process died (exit code {process.exitcode})")
+                                           message=f"the worker process died (exit code {process.exitcode})",
+                                           weights=np.asarray(tasks[index][0]))
                     self._workers[slot] = self._start()
                     self._await_ready(*self._workers[slot])
                 del busy[slot]

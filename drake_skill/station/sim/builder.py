@@ -57,6 +57,7 @@ from pydrake.geometry import (
     RoleAssign,
 )
 from pydrake.math import RigidTransform
+from pydrake.multibody.meshcat import ContactVisualizer, ContactVisualizerParams
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, PdControllerGains
@@ -72,6 +73,9 @@ from drake_skill.station.models import add_package_paths, add_panda_illustration
 from drake_skill.station.config import StationConfig, validate_station_config
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor, robot_scene_pairs
+
+#: Meshcat's contact force arrows: newtons per metre of arrow (a 50 N push draws 25 cm).
+CONTACT_N_PER_M = 200.0
 
 # The robot's and the table's collision geometries get these ContactConfig
 # surfaces (body name, geometry name fragment, "" for any of the body's
@@ -289,6 +293,9 @@ class Station(Diagram):
         if meshcat is not None:
             MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat,
                                            MeshcatVisualizerParams(role=Role.kIllustration))
+            # Contact forces as arrows, 1 m per CONTACT_N_PER_M (the reflex trips at tens of N).
+            ContactVisualizer.AddToBuilder(builder, plant, meshcat,
+                                           ContactVisualizerParams(newtons_per_meter=CONTACT_N_PER_M))
         builder.BuildInto(self)
         self.set_name("station")
         self._kinematics = None
