@@ -384,7 +384,7 @@ def test_the_logs_of_a_fresh_and_a_resumed_start(tmp_path):
     (tmp_path / "tensorboard").mkdir()
     resumed = RunLog(tmp_path, note, rollouts_per_episode=2)
     resumed._tensorboard = lambda purge_step: purges.append(purge_step)
-    resumed.start([], [_curve_row(0, 1.0), _curve_row(4, 2.0, 1.0)], fresh=False)
+    resumed.start([], [_curve_row(0, 1.0), _curve_row(7, 2.0, 1.0), _curve_row(4, 2.0, 1.0)], fresh=False)
     resumed.start([], [], fresh=False)
     assert purges == [None, 5, 0] and (tmp_path / "tensorboard").is_dir()
     assert (tmp_path / "results.jsonl").read_text() == ""
@@ -405,3 +405,75 @@ def test_software_versions_name_every_package_and_the_checkout(monkeypatch):
     assert versions["python"] == sys.version.split()[0]
     root = Path(drake_skill.__file__).resolve().parent.parent
     assert (versions["git_commit"], versions["git_dirty"]) == _git_commit(root)
+
+
+class _Writer:
+    """A stand-in SummaryWriter: what was written, flushed and closed."""
+
+    def __init__(self):
+        self.scalars, self.flushes, self.closed = [], 0, False
+
+    def add_scalar(self, tag, value, global_step):
+        self.scalars.append((tag, value, global_step))
+
+    def flush(self):
+        self.flushes += 1
+
+    def close(self):
+        self.closed = True
+
+
+def test_rows_go_to_the_writer_as_scalars_until_it_is_closed(tmp_path, monkeypatch):
+    writer = _Writer()
+    log = RunLog(tmp_path, io.StringIO(), rollouts_per_episode=3)
+    log.row(_curve_row(0, 5.0))                    # before start: no writer, the row is still appended
+    log._tensorboard = lambda purge_step: writer
+    log.start([], [], fresh=True)
+    log.row(_curve_row(2, 7.5, 6.0, {"reflex": 1}))
+    assert writer.scalars == [("progress/rollouts_used", 6.0, 2), ("progress/greedy_success", 0.0, 2),
+                              ("progress/greedy_verdict", 1.0, 2), ("progress/greedy_return", 7.5, 2),
+                              ("progress/mean_return", 6.0, 2), ("progress/best_return", 11.0, 2),
+                              ("progress/exploration", 0.25, 2), ("progress/rollout_successes", 1.0, 2),
+                              ("progress/failures", 1.0, 2), ("progress/ik_warnings", 0.0, 2)]
+    assert all(type(v) is float for _, v, _ in writer.scalars) and writer.flushes == 1
+    log.close()
+    assert writer.closed
+    log.row(_curve_row(3, 8.0))                    # after close: appended, not written to the closed writer
+    log.close()
+    assert len(writer.scalars) == 10 and [r["episode"] for r in read_progress(tmp_path / "progress.csv")] == [2, 3]
+    # Without the tensorboard package: one exact line on the run's stream.
+    monkeypatch.setitem(sys.modules, "tensorboard", None)
+    note = io.StringIO()
+    assert RunLog(tmp_path, note, 3)._tensorboard(purge_step=None) is None
+    assert note.getvalue() == ("tensorboard is not installed: no TensorBoard events "
+                               "(pip install 'drake-skill[tensorboard]')\n")
+
+
+def test_a_damaged_progress_file_says_what_holds_the_same_curve(tmp_path):
+    path = tmp_path / "progress.csv"
+    path.write_text("episode,greedy\n0,1\n")
+    with pytest.raises(ValueError) as e:
+        read_progress(path)
+    assert str(e.value) == (f"{path}: not a learning run's progress.csv (columns ['episode', 'greedy']; expected "
+                            f"{', '.join(PROGRESS_COLUMNS)})")
+    path.write_bytes((",".join(PROGRESS_COLUMNS) + "\n").encode() + b"\xff0")
+    with pytest.raises(ValueError) as e:
+        read_progress(path)
+    assert str(e.value).startswith(f"{path}: damaged CSV (") and str(e.value).endswith(
+        "); summary.json and results.jsonl beside it hold the same curve")
+
+
+def test_the_git_state_ignores_untracked_files_and_sees_changed_ones(tmp_path):
+    def git(*args):
+        subprocess.run(["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t", *args], check=True,
+                       capture_output=True)
+
+    git("init", "-q")
+    (tmp_path / "tracked.txt").write_text("a")
+    git("add", "tracked.txt")
+    git("commit", "-q", "-m", "x")
+    (tmp_path / "untracked.txt").write_text("b")
+    commit, dirty = _git_commit(tmp_path)
+    assert dirty is False and len(commit) == 40
+    (tmp_path / "tracked.txt").write_text("changed")
+    assert _git_commit(tmp_path) == (commit, True)
