@@ -116,6 +116,10 @@ def test_trip_thresholds_are_strict_and_name_the_first_joint_over():
     tau = np.zeros(7)
     tau[0] = 31.0
     assert reflex_filter_step(x0, 0.0, tau, 0.3, p)[1].cause == "torque joint 1"
+    assert reflex_filter_step(x0, 30.0, tau, 0.3, p)[1].cause == "torque joint 1"   # the force at its limit
+    # A state of ints (a list) is taken as floats, not truncated.
+    x, _ = reflex_filter_step([0] * 10, 2.5, [1] * 7, 0.1, p)
+    assert x[0] == 2.5 and x[-1] == 2.5
     # Enabled is params[0] >= 0.5.
     p[0] = 0.5
     assert reflex_filter_step(x0, 40.0, tau, 0.3, p)[1] is not None
@@ -159,7 +163,7 @@ def test_the_monitor_is_added_named_and_exported():
     status = simulator.AdvanceTo(1.0)
     assert status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition
     assert status.return_time() == pytest.approx(0.0, abs=1e-12)   # the update at 0 already trips
-    assert "collision reflex (force)" in status.message()
+    assert "collision reflex (force)" in status.message() and status.system() is monitor
     out = diagram.GetOutputPort("reflex_state").Eval(simulator.get_context())
     assert out[0] == 50.0
 
@@ -231,6 +235,8 @@ def test_robot_scene_contact_force_sums_the_magnitudes():
     from drake_skill.station.reflex import RobotSceneContactForce
 
     system = RobotSceneContactForce([1, 2])
+    assert system.get_input_port().get_name() == "contact_results"
+    assert system.get_output_port().get_name() == "force" and system.get_output_port().size() == 1
     context = system.CreateDefaultContext()
     from pydrake.multibody.plant import ContactResults
     system.get_input_port().FixValue(context, ContactResults())
