@@ -201,7 +201,8 @@ class RolloutResult:
       these, ``times``, ``ee_pose`` and ``object_state`` up to its stop.
     frame_times (K,) [s], frames (K, h, w, 3) uint8: the perception camera's image once a
       second (:mod:`drake_skill.station.frames`), up to the stop; last_frame (h, w, 3): the
-      image at the end or the stop (empty without a camera).
+      image at the end or the stop (empty where the runner renders nothing: no goal model and
+      the ground-truth object pose).
     """
 
     seed: int
@@ -351,7 +352,8 @@ class RolloutRunner:
             from drake_skill.perception.systems import add_object_segmenter
             self.segmenter = add_object_segmenter(builder, self.station)
         self.loggers = StationLoggers(builder, self.station, self.rollout_config.record_hz)
-        self.frames = add_camera_frames(builder, self.station) if station_config.enable_camera else None
+        # Frames where the runner renders anyway (a runner on the ground truth renders nothing).
+        self.frames = add_camera_frames(builder, self.station) if needs_camera else None
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         self.simulator = Simulator(self.diagram, self.context)
