@@ -48,7 +48,8 @@ records, appended at each checkpoint), ``progress.csv`` (one row per
 greedy-evaluated episode, appended as each is known; also the
 ``on_episode`` callback's argument and, with the ``tensorboard`` package
 installed, the scalars in ``tensorboard/``; :mod:`~drake_skill.learning.runlog`),
-``summary.json``, ``learning_curve.png``, ``skill/`` (the learned skill),
+``summary.json``, ``learning_curve.png``, ``report.html`` (the run on one page:
+:mod:`~drake_skill.learning.run_report`), ``skill/`` (the learned skill),
 ``replay_first.html`` / ``replay_last.html`` (Meshcat replays of the first
 and last greedy executions), ``rollouts/`` (every rollout's weights, seed,
 path and last camera frame, and a failed one's frames up to its stop:
@@ -80,6 +81,7 @@ from drake_skill.learning import selection
 from drake_skill.learning.config import REWARDS, LearnConfig
 from drake_skill.learning.evaluation import HELD_OUT_SEED0, evaluate_greedy
 from drake_skill.learning.rollout_store import rollouts_path, save_rollouts
+from drake_skill.learning.run_report import write_run_report
 from drake_skill.learning.exploration import SpanExploration
 from drake_skill.learning.plots import plot_learning_curve
 from drake_skill.learning.policy_search import PER_STEP_METHODS, make_policy_search
@@ -93,7 +95,7 @@ __all__ = ["ARTIFACTS", "HELD_OUT_SEED0", "REWARDS", "LearnConfig", "LearnOutcom
 #: What a learning run writes into its output directory (and ``tensorboard/`` where the
 #: ``tensorboard`` package is installed).
 ARTIFACTS = ("config.json", "results.jsonl", "progress.csv", "summary.json", "learning_curve.png",
-             "return_vs_state.png", "skill/",
+             "return_vs_state.png", "report.html", "skill/",
              "replay_first.html", "replay_last.html", "rollouts/", "checkpoint/")
 
 
@@ -244,7 +246,7 @@ class LearningRun:
                                   "it, --force to start over, or choose another --out")
         self.out_dir.mkdir(parents=True, exist_ok=True)
         for name in ("results.jsonl", "progress.csv", "summary.json", "learning_curve.png", "replay_first.html",
-                     "replay_last.html"):
+                     "replay_last.html", "report.html", "return_vs_state.png"):
             (self.out_dir / name).unlink(missing_ok=True)
         for stale in (self.out_dir / "rollouts").glob("*.npz"):
             stale.unlink()
@@ -495,9 +497,10 @@ class LearningRun:
             + len(chosen.get("seeds", [])) * len(chosen.get("candidates", [])),
             "wall_s_this_call": round(time.perf_counter() - self._wall_start, 1),
             "artifacts": [a for a in (*ARTIFACTS, "tensorboard/")
-                          if (self.out_dir / a.rstrip("/")).exists() or a == "summary.json"],
+                          if (self.out_dir / a.rstrip("/")).exists() or a in ("summary.json", "report.html")],
         }
         atomic_write_json(self.out_dir / "summary.json", summary)
+        write_run_report(self.out_dir, state.records, summary)
         return LearnOutcome(summary, self.out_dir, True, state.search, weights)
 
     def _reward_quality(self) -> dict:
