@@ -321,7 +321,9 @@ def test_rate_limiter_constants_ports_and_period_errors():
     assert (limiter.GetOutputPort("state").size(), limiter.GetOutputPort("acceleration").size()) == (6, 3)
     by3 = RateLimiter(3, 2e-3, 10.0, 1.0, 1.0, 1.0, 1e-3, update_period=6e-3)
     assert by3._substeps == 3 and by3.GetUniquePeriodicDiscreteUpdateAttribute().period_sec() == pytest.approx(6e-3)
-    for update in (0.9e-3, 5e-3):
+    # The period must divide the update period to a relative 1e-9: 1e-12 off is a whole number, 5e-7 is not.
+    assert RateLimiter(3, 2e-3, 10.0, 1.0, 1.0, 1.0, 1e-3, update_period=4e-3 * (1 + 1e-12))._substeps == 2
+    for update in (0.9e-3, 5e-3, 4e-3 + 2e-9):
         with pytest.raises(ValueError) as e:
             RateLimiter(3, 2e-3, 10.0, 1.0, 1.0, 1.0, 1e-3, update_period=update)
         assert str(e.value) == (f"RateLimiter: update_period = {update} s must be a whole number of periods "
@@ -368,10 +370,14 @@ def test_finger_limiter_halves_and_clips_the_opening():
     for opening, half in ((0.03, 0.015), (1.0, limits.FINGER_MAX), (-0.2, 0.0)):
         fingers.set_opening(context, opening)
         np.testing.assert_array_equal(fingers.get_output_port().Eval(context), [half, half, 0.0, 0.0])
+    assert fingers.GetSubsystemByName("limiter") is limiter
+    assert fingers.GetSubsystemByName("split").D().tolist() == [[1.0], [1.0]]     # the opening to both fingers
     fingers.set_opening(context, 0.03)
+    fingers.get_input_port().FixValue(context, [0.05])
+    Simulator(fingers, context).AdvanceTo(1.0)
+    np.testing.assert_allclose(fingers.get_output_port().Eval(context), [0.025, 0.025, 0.0, 0.0], atol=1e-9)
     fingers.get_input_port().FixValue(context, [1.0])     # an opening past the travel: each finger to its end
-    simulator = Simulator(fingers, context)
-    simulator.AdvanceTo(1.0)
+    Simulator(fingers, context).AdvanceTo(2.0)
     np.testing.assert_allclose(fingers.get_output_port().Eval(context), [limits.FINGER_MAX] * 2 + [0.0] * 2,
                                atol=1e-9)
 
@@ -404,6 +410,9 @@ def test_end_effector_controller_ik_parameters_and_reset():
     assert (limiter._consts.h, limiter._consts.w2, limiter._consts.gain_ref, limiter._substeps) == \
         (1e-3, 625.0, 0.05, 2)
     assert limiter._consts.v_max == list(limits.QD_MAX) and limiter._consts.a_max == list(limits.QDD_MAX)
+    assert limiter._consts.jh == [j * 1e-3 for j in limits.QDDD_MAX]
+    assert controller.GetSubsystemByName("diff_ik") is controller._diff_ik
+    assert controller.GetSubsystemByName("rate_limiter") is limiter
     assert [controller.get_output_port(i).get_name() for i in range(2)] == \
         ["panda_state_desired", "joint_acceleration_commanded"]
     assert controller.get_input_port().get_name() == "X_WE_desired"
