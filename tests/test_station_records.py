@@ -87,6 +87,8 @@ def test_the_loggers_read_the_grid_samples_and_the_interval_peaks():
     np.testing.assert_array_equal(records.object_state, k / 10.0)
     # Peaks of FORCE over k = 0, 0..4, 4..8, 8..12 (both ends included).
     np.testing.assert_array_equal(records.contact_force, [0.0, 7.0, 9.0, 8.0])
+    # Asked for fewer samples than the run reached: those, k = 0..n.
+    np.testing.assert_array_equal(loggers.read(simulator.get_context(), 2).times, [0.0, 0.004, 0.008])
     assert records.ee_pose.shape == (4, 7)
     for row, kk in zip(records.ee_pose, k):
         q = kk * np.arange(1, 8) / 100.0
