@@ -120,7 +120,13 @@ def test_a_users_object_and_skill_from_data_to_a_learning_episode(user_skill, ca
     # The plate went out past the rule's 6 cm and the red object was seen (its hue range wraps through 0).
     assert all(0.06 < d.final_object_state <= 0.15 for d in demos)
     assert all(d.perception_valid.mean() > 0.9 for d in demos)
+    capsys.readouterr()
     assert main(["fit", "--demos", str(demos_dir), "--skill", skill_file, "--out", str(skill_dir), "--no-refine"]) == 0
+    # The fit report: the segment kept the tray throughout, so no segment warning (issue 51 item 2; the
+    # skill file's 10 bases miss the demonstrations by more than the tolerance, which is warned about).
+    assert "the segment keeps" not in capsys.readouterr().err
+    page = (skill_dir / "fit_report.html").read_text()
+    assert "the segment keeps" not in page and page.count("<figure>") == 6 and page.count("<h2>demo_00") == 2
     skill = Skill.load(skill_dir)
     assert skill.name == "push_plate" and skill.config.dmp.n_basis == 10 and skill.gripper_opening == 0.0
     assert skill.station_config().object.model == "red_tray"

@@ -11,6 +11,16 @@ prints the goal model's summary, and writes SKILL_DIR:
     goal_model.png      the goal HMM as a graph: states, transitions, values,
                         initial (blue) and terminal (green) states, a cloud per state
     demo_returns.png    the dense return of each demonstration against time
+    fit_report.html     per demonstration, on one page opened by any browser: what the
+                        segment kept of the object over time (the scene posed again on
+                        the simulated station), three frames with the segment drawn
+                        over them, the goal features and the goal model's state over
+                        time, the imitation's distance from the demonstration [mm] and
+                        the peak contact force (drake_skill.workflow.fit_report)
+
+A stretch of half a second or more in which the segment keeps less than half
+of the object's visible pixels is a warning line naming the demonstration,
+the time and the fix (the colour range, or the clustering).
 """
 
 from __future__ import annotations
@@ -21,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_skill.cli import errors
+from drake_skill.workflow.fit_report import segment_tracks, write_fit_report
 from drake_skill.workflow.prepare import fit_and_refine_report, print_fit_report
 
 NAME = "fit"
@@ -102,14 +113,17 @@ def run(args: argparse.Namespace) -> int:
     lines, warnings = fit_and_refine_report(skill, demos)
     skill = save_fitted_skill(skill, args.out, overwrite=args.force)
     print(skill.summary())
-    print_fit_report(lines, warnings)
+    print("checking what the camera kept of each demonstration ...")
+    tracks, seen = segment_tracks(skill, demos)
+    print_fit_report(lines, warnings + seen)
+    write_fit_report(args.out / "fit_report.html", skill, demos, tracks, warnings + seen)
     plot_goal_model(skill.pomrp, args.out / "goal_model.png", clouds=_state_clouds(skill, demos),
                     title=f"goal model of '{config.skill}'")
     rewards = {f"demo {i}": skill.pomrp.rewards(skill.goal_data(d.object_points, d.perception_valid, X_WO=d.X_WO_start))
                for i, d in enumerate(demos)}
     plot_return(rewards, args.out / "demo_returns.png")
     print(f"wrote {args.out}/ (skill.yaml, skill.json, arrays.npz, pcae.safetensors, "
-          "goal_model.png, demo_returns.png)")
+          "goal_model.png, demo_returns.png, fit_report.html)")
     return 0
 
 
