@@ -85,7 +85,9 @@ def plot_goal_model(pomrp: Pomrp, path, *, clouds: Sequence[np.ndarray] | Callab
     initial = set(int(s) for s in np.flatnonzero(gm.startprob_ >= 0.5 * gm.startprob_.max()))
 
     fig = new_figure((max(6.0, 1.8 * k + 1.5), 4.4 if clouds is not None else 3.0))
-    ax = fig.add_axes([0.03, 0.02, 0.94, 0.62 if clouds is not None else 0.88])
+    # A band at the top for the title, so that it never overlaps the insets' or the states' labels.
+    top = (0.985 - 0.16 / fig.get_figheight()) if title else 0.99
+    ax = fig.add_axes([0.03, 0.02, 0.94, 0.60 if clouds is not None else top - 0.06])
     ax.set_aspect("equal")
     ax.axis("off")
     r = 0.28
@@ -138,7 +140,7 @@ def plot_goal_model(pomrp: Pomrp, path, *, clouds: Sequence[np.ndarray] | Callab
                 raise ValueError(f"clouds[{s}]: expected a point cloud of shape (N, 3), got {cloud.shape}")
             frac = (pos[s, 0] - x0) / (x1 - x0)
             w = min(0.9 / k, 0.2)
-            inset = fig.add_axes([0.03 + 0.94 * frac - w / 2, 0.68, w, 0.28])
+            inset = fig.add_axes([0.03 + 0.94 * frac - w / 2, 0.64, w, top - 0.64 - 0.05])
             inset.scatter(cloud[:, a], cloud[:, b], s=0.5, c=TERMINAL_COLOR if s in terminal else "0.3",
                           linewidths=0)
             inset.set_aspect("equal", adjustable="datalim")
@@ -146,7 +148,7 @@ def plot_goal_model(pomrp: Pomrp, path, *, clouds: Sequence[np.ndarray] | Callab
             inset.set_yticks([])
             inset.set_title(f"s{s}", fontsize=7)
     if title:
-        fig.suptitle(title, fontsize=10)
+        fig.suptitle(title, fontsize=10, y=0.985, va="top")
     return write_figure_png(fig, path)
 
 
