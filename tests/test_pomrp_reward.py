@@ -110,6 +110,9 @@ def test_invalid_frames_are_skipped(pomrp, demo):
     np.testing.assert_array_equal(G, kept)
     assert reward.smoothed_return(root) == pomrp.episode_return(kept)
     assert reward.filtered_return(root) == pytest.approx(pomrp.filtered_rewards(kept).sum(), rel=1e-10)
+    # Each kept frame's online reward, the per-step methods' rewards (computed once, online).
+    np.testing.assert_allclose(reward.filtered_rewards(root), pomrp.filtered_rewards(kept), rtol=1e-12, atol=1e-12)
+    assert reward.filtered_rewards(root).shape == (33,)
 
 
 def test_period_is_configurable(pomrp, demo):

@@ -526,7 +526,7 @@ class RolloutRunner:
                 rewards, total = pomrp.reward_and_return(G)
                 result.rewards = np.asarray(rewards, dtype=float)
                 result.dense_return = float(total)
-                result.filtered_rewards = np.asarray(pomrp.filtered_rewards(G), dtype=float)
+                result.filtered_rewards = reward.filtered_rewards(self.context)   # online, once
                 result.verdict = bool(pomrp.verdict(G))
         # A station without ground truth (the robot) reports a NaN object state.
         values = [result.dense_return] + ([final] if getattr(self.station, "has_ground_truth", True) else [])

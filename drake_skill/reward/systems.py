@@ -22,8 +22,11 @@ Ports:
     ``sum_s v(s) P(s_t = s | g_1..g_t)`` (0 before the first frame);
   * output ``return`` (vector 1): running sum of those rewards.
 
-At the end of a rollout, :meth:`goal_sequence`, :meth:`smoothed_return`
-(Eq. 4.5 with smoothed posteriors) and :meth:`verdict` read the result.
+At the end of a rollout, :meth:`goal_sequence`, :meth:`filtered_rewards`
+(the online rewards, kept per frame), :meth:`smoothed_return` (Eq. 4.5 with
+smoothed posteriors, which need the whole sequence) and :meth:`verdict` read
+the result. Each reward is computed once: the filtered one here, online; the
+smoothed one offline from the goal sequence (``RolloutRunner``).
 
 
 ## The goal pipeline
@@ -89,10 +92,12 @@ class PomrpReward(LeafSystem):
         self._goal_port = self.DeclareVectorInputPort("goal_data", d)
         self._valid_port = self.DeclareVectorInputPort("valid", 1)
         # Per-run state: frame count; filter (log belief (k), log P(g_1..g_t),
-        # last reward, running return); the frames themselves (capacity x d).
+        # last reward, running return); the frames themselves (capacity x d); each
+        # frame's filtered reward (capacity).
         self._count_index = self.DeclareDiscreteState(1)
         self._filter_index = self.DeclareDiscreteState(k + 3)
         self._frames_index = self.DeclareDiscreteState(self._capacity * d)
+        self._rewards_index = self.DeclareDiscreteState(self._capacity)
         self.DeclarePeriodicDiscreteUpdateEvent(config.period, 0.0, self._update)
         xd = {self.xd_ticket()}
         self._reward_port = self.DeclareVectorOutputPort("reward", 1, self._calc_reward, xd)
@@ -141,6 +146,7 @@ class PomrpReward(LeafSystem):
         frames = discrete_state.get_mutable_vector(self._frames_index)
         for i in range(self._d):
             frames.SetAtIndex(n * self._d + i, g[i])
+        discrete_state.get_mutable_vector(self._rewards_index).SetAtIndex(n, reward)
         discrete_state.get_mutable_vector(self._count_index).SetAtIndex(0, n + 1)
 
     def _calc_reward(self, context: Context, output):
@@ -164,6 +170,13 @@ class PomrpReward(LeafSystem):
         n = int(context.get_discrete_state(self._count_index).GetAtIndex(0))
         frames = context.get_discrete_state(self._frames_index).get_value()
         return np.array(frames[: n * self._d]).reshape(n, self._d)
+
+    def filtered_rewards(self, context: Context) -> np.ndarray:
+        """Each valid frame's filtered reward, as the ``reward`` output gave it, ``(n,)`` (a copy): the
+        per-step rewards of the per-step methods (docs/method.md section 4), computed here once."""
+        context = self._own(context)
+        n = int(context.get_discrete_state(self._count_index).GetAtIndex(0))
+        return np.array(context.get_discrete_state(self._rewards_index).get_value()[:n])
 
     def filtered_return(self, context: Context) -> float:
         """Running sum of the filtered per-step rewards (the ``return`` output)."""
