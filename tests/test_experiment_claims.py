@@ -1,6 +1,8 @@
 """The experiment report's statistics and claim rules (docs/results/experiment; thesis 7.1), on
 hand-made cells: no simulation. The verdicts in ``results.md`` are decided here."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -324,3 +326,58 @@ def test_figures_are_pngs_of_their_size_without_a_software_tag(tmp_path):
     assert data[:8] == b"\x89PNG\r\n\x1a\n"
     assert (int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")) == (640, 420)
     assert b"Software" not in data
+
+
+def test_report_edges_found_by_mutation():
+    """Rules at their edges: C from episode 1, a skipped cell before a kept one, two-run spreads, a
+    Brown-Forsythe p that is not a number (both samples' deviations all equal: p = 1)."""
+    from drake_skill.experiments.report import _episode_length, cells_from_rows
+
+    assert _episode_length([_row("open", "pi2", "dense", 0, 0, 0, 0), _row("open", "pi2", "dense", 0, 1, 6, 0)]) == 6
+    gappy = [_row("close", "pi2", "dense", 0, e, 4 * e, 1) for e in (0, 2)]
+    kept = [_row("open", "pi2", "dense", 0, e, 4 * e, 1) for e in (0, 1)]
+    assert [c.skill for c in cells_from_rows(gappy + kept)] == ["open"]
+    assert compare_spread([1.0, 1.0], [0.0, 1.0]) == ("better", "sd 0.00 vs 0.71, Brown-Forsythe p = 0.000")
+    assert compare_spread([0.0, 1.0], [1.0, 1.0]) == ("worse", "sd 0.71 vs 0.00, Brown-Forsythe p = 0.000")
+    assert compare_spread([0.0, 1.0], [0.0, 1.0, 0.0, 1.0]) == ("unclear", "sd 0.71 vs 0.58, Brown-Forsythe p = 1.000")
+    s2 = math.sqrt(2.0)                             # an sd of exactly 1
+    assert compare_spread([0.0, s2], [0.0, s2] * 2) == ("unclear", "sd 1.00 vs 0.82, Brown-Forsythe p = 1.000")
+    assert compare_spread([0.0, s2] * 2, [0.0, s2]) == ("unclear", "sd 0.82 vs 1.00, Brown-Forsythe p = 1.000")
+
+
+def test_claim_lines_order_and_rivals():
+    from drake_skill.experiments.report import claim_black_box_beats_per_step, claim_leader
+
+    # Skills by name, rewards in REWARDS order (an unknown reward last); a missing pair is skipped, not the end.
+    cells = [_cell(m, r, [ALWAYS] * 3, skill=k) for k in ("b", "a") for r in ("dense", "aaa")
+             for m in ("pi2-es-cov", "pi2-cov")]
+    _, lines = claim_black_box_beats_per_step(cells)
+    assert lines[0] == "by reward alone: dense cannot tell, aaa cannot tell"
+    assert [line.split(": AUC")[0] for line in lines[1:]] == ["a, dense", "a, aaa", "b, dense", "b, aaa"]
+    # The leader against one other; a skill without the leader first does not end the search.
+    verdict, lines = claim_leader([_cell("pi2", "dense", [ZERO] * 3, skill="a"),
+                                   _cell("pi2-es-cov", "dense", [ALWAYS] * 3, [1.0] * 3, skill="b"),
+                                   _cell("pi2", "dense", [MID] * 3, [0.5] * 3, skill="b")])
+    assert len(lines) == 3 and lines[0].startswith("b, fastest (AUC): pi2-es-cov vs the best other, pi2: ")
+    # Rivals: the highest mean for speed and height, the lowest sd for spread, wherever they stand.
+    cells = [_cell("pi2-es-cov", "dense", [ALWAYS] * 4, [1.0] * 4),
+             _cell("cma-es", "dense", [EARLY, LATE] * 2, [0.6, 0.4] * 2), _cell("pi2", "dense", [EARLY] * 4, [0.2] * 4)]
+    _, lines = claim_leader(cells)
+    assert [line.split(": ")[1].split(", ")[1] for line in lines] == ["pi2", "cma-es", "pi2"]
+
+
+def test_bands_of_no_runs_and_of_three(monkeypatch):
+    from drake_skill.experiments import report
+
+    saved = []
+    monkeypatch.setattr(report, "_save", lambda fig, path: saved.append(fig) or path)
+    three = report.Cell("s", "pi2", "dense", [0, 1, 2], np.array([[0, 1, 1], [1, 1, 0], [1, 1, 1]]), [None] * 3, None)
+    none = report.Cell("s", "power", "dense", [], np.zeros((0, 3), dtype=int), [], None)
+    report.plot_dense([three, none], "s", "d.png")
+    ax = saved.pop().axes[0]
+    np.testing.assert_array_equal(ax.get_lines()[1].get_ydata(), [np.nan] * 3)
+    mean, sd = np.array([2, 3, 2]) / 3, np.std([[0, 1, 1], [1, 1, 0], [1, 1, 1]], axis=0, ddof=1)
+    y = ax.collections[0].get_paths()[0].vertices[:, 1]
+    for value in np.r_[np.clip(mean - sd, 0, 1), np.clip(mean + sd, 0, 1)]:
+        assert np.any(np.abs(y - value) < 1e-12), value
+    assert np.any(np.abs(y - (mean[0] - sd[0])) < 1e-12) and mean[0] - sd[0] > 0.05      # not clipped
