@@ -99,7 +99,12 @@ def test_failures_are_classified_by_reason():
     assert classify_failure(rollout._PerceptionError("not seen")) == "perception"
     assert classify_failure(rollout._NonFiniteError("return")) == "non_finite"
     assert classify_failure(rollout._WorkspaceError("too far")) == "workspace"
-    assert classify_failure(RuntimeError("SAP solver failed to converge")) == "solver"
+    from drake_skill.station.hardware.station import StaleStatusError
+    assert classify_failure(StaleStatusError("no status for 0.5 s")) == "stale_status"
+    from drake_skill.reward.systems import NonFiniteGoalData
+    assert classify_failure(NonFiniteGoalData("goal_data[0] = nan")) == "non_finite"
+    # Nothing is read from a message: an untyped error is "error" whatever it says.
+    assert classify_failure(RuntimeError("SAP solver failed to converge")) == "error"
     assert classify_failure(KeyError("x")) == "error"
     assert set(FAILURE_REASONS) >= {"diverged", "solver", "reflex", "perception", "non_finite", "error"}
 

@@ -161,9 +161,9 @@ def _run(args) -> int:
         final = "-" if not math.isfinite(result.final_object_state) else f"{result.final_object_state:.3f}"
         print(f"{result.seed:>6} {str(result.verdict):>8} {result.dense_return:>9.1f} {final:>12} "
               f"{result.wall_s:>7.1f}  {result.message[:80] if result.failed else ''}", flush=True)
-        if result.failed and "StaleStatusError" in result.message and len(results) == 1:
+        if result.reason == "stale_status" and len(results) == 1:
             raise ConnectionError(result.message.replace("StaleStatusError: ", ""))   # no driver: a user error
-        if result.failed and ("StaleStatusError" in result.message or result.reason == "reflex"):
+        if result.reason in ("stale_status", "reflex"):
             print("stopped: the robot's status stopped or its reflex fired", file=sys.stderr)
             break
     out.mkdir(parents=True, exist_ok=True)

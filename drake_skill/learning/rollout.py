@@ -72,8 +72,9 @@ __all__ = ["FAILURE_REASONS", "ActionModel", "ObjectPoseSource", "RolloutConfig"
 #: converge; the station's reflex stopped the arm (excessive contact force);
 #: the segmenter did not see the object on the first frame; a non-finite
 #: value (trajectory, goal data, return); the DMP path leaves the workspace
-#: (checked before simulating); any other exception.
-FAILURE_REASONS = ("diverged", "solver", "reflex", "perception", "non_finite", "workspace", "error")
+#: (checked before simulating); the robot's status stopped arriving (the
+#: hardware station); any other exception.
+FAILURE_REASONS = ("diverged", "solver", "reflex", "perception", "non_finite", "workspace", "stale_status", "error")
 
 
 class _PerceptionError(RuntimeError):
@@ -95,21 +96,17 @@ class _WorkspaceError(RuntimeError):
 
 
 def classify_failure(error: BaseException) -> str:
-    """The :data:`FAILURE_REASONS` entry for an exception raised by a rollout.
+    """The :data:`FAILURE_REASONS` entry for an exception raised by a rollout: its typed ``reason``.
 
     The station's failures carry their reason (``ReflexError.reason`` =
-    "reflex", ``SolverError`` "solver", ``DivergedError`` "diverged"), as do
-    this module's; anything else is classified by its message.
+    "reflex", ``SolverError`` "solver", ``DivergedError`` "diverged",
+    ``StaleStatusError`` "stale_status"), as do this module's; anything else
+    is "error". Nothing is read from a message's text (Drake's untyped
+    solver failure becomes a ``SolverError`` where it is raised,
+    ``station.recording.advance_station``).
     """
     reason = getattr(error, "reason", None)
-    if isinstance(reason, str) and reason in FAILURE_REASONS:
-        return reason
-    text = str(error)
-    if "converge" in text and ("SAP" in text or "solver" in text):
-        return "solver"
-    if "non-finite" in text or "NaN" in text or "nan" in text.split() or "inf" in text.split():
-        return "non_finite"
-    return "error"
+    return reason if isinstance(reason, str) and reason in FAILURE_REASONS else "error"
 
 
 @dc.dataclass

@@ -59,7 +59,7 @@ from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
 from drake_skill.perception.systems import ObjectSegmenter, PcaeFeaturizer, PcaeFeaturizerConfig, add_object_segmenter
 from drake_skill.reward.pomrp import Pomrp
 
-__all__ = ["PomrpRewardConfig", "PomrpReward", "GoalPipeline", "add_goal_pipeline"]
+__all__ = ["NonFiniteGoalData", "PomrpRewardConfig", "PomrpReward", "GoalPipeline", "add_goal_pipeline"]
 
 
 @dataclass
@@ -71,6 +71,12 @@ class PomrpRewardConfig:
 
     period: float = 0.1
     capacity: int = 600
+
+
+class NonFiniteGoalData(ValueError):
+    """A valid frame's goal data is not finite (a rollout's failure reason "non_finite")."""
+
+    reason = "non_finite"
 
 
 class PomrpReward(LeafSystem):
@@ -126,7 +132,7 @@ class PomrpReward(LeafSystem):
         g = np.array(self._goal_port.Eval(context), dtype=float)
         if not np.all(np.isfinite(g)):
             i = int(np.flatnonzero(~np.isfinite(g))[0])
-            raise ValueError(
+            raise NonFiniteGoalData(
                 f"PomrpReward: goal_data[{i}] = {g[i]} at t = {context.get_time():.3f} s while valid; "
                 "expected finite goal data, or valid = 0 for frames without it")
         n = int(context.get_discrete_state(self._count_index).GetAtIndex(0))

@@ -94,6 +94,8 @@ class StaleStatusError(RuntimeError):
     status and of the check that found it stale (None where not known).
     """
 
+    reason = "stale_status"
+
     def __init__(self, message: str, last_seen: float | None = None, detected_at: float | None = None):
         super().__init__(message)
         self.last_seen, self.detected_at = last_seen, detected_at
