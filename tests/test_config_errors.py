@@ -111,11 +111,22 @@ def test_a_directive_naming_no_frame_or_model_is_named_by_its_index(child, expec
 
 
 @pytest.mark.parametrize("edit, expected", [
-    (("panda::panda_link0", "panda::panda_linkX"),
-     "directives[1] (add_weld {parent: world, child: panda::panda_linkX}): no frame 'panda_linkX' in model 'panda'"),
-    (("package://drake_skill_models/drawer.sdf", "broken.sdf"), "directives[6] (add_model {name: drawer, file: file://"),
+    (("table::table_top}", "table::table_topX}"),
+     "directives[2] (add_weld {parent: world, child: table::table_topX}): no frame 'table_topX' in model 'table'"),
+    (("package://drake_skill_models/drawer.sdf", "broken.sdf"), "directives[3] (add_model {name: drawer, file: file://"),
 ])
 def test_a_scenario_file_with_a_bad_directive_is_one_line_naming_the_file(tmp_path, capsys, edit, expected):
+    _bad_scenario(tmp_path, capsys, edit, f"scenario {expected}", "; fix that directive")
+
+
+def test_a_scenario_including_a_missing_directives_file_names_the_scenario_and_the_field(tmp_path, capsys):
+    _bad_scenario(tmp_path, capsys, ("package://drake_skill_models/panda_robot.dmd.yaml", "no_robot.dmd.yaml"),
+                  "station config field 'directives[0].add_directives.file' = 'file://",
+                  "no_robot.dmd.yaml does not exist)")
+
+
+
+def _bad_scenario(tmp_path, capsys, edit, expected, end):
     """A weld to a frame no model has, or a model file Drake cannot parse: found where the scenario
     file loads, one line naming the file, the directive and its index, exit 2 (issues 46, 47)."""
     import drake_skill
@@ -132,4 +143,4 @@ def test_a_scenario_file_with_a_bad_directive_is_one_line_naming_the_file(tmp_pa
     code = main(["skills", str(skill), "--check-camera"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and "\n" not in err and "Traceback" not in err
-    assert f"station config ({scenario}): scenario {expected}" in err and err.endswith("; fix that directive")
+    assert f"station config ({scenario}): {expected}" in err and err.endswith(end), err

@@ -352,11 +352,20 @@ def check_settings(out: Path, config: GridConfig, specs: dict) -> None:
                 raise ValueError(f"{flag} {value}: the runs stored in {out} used {saved.get(key)}; give "
                                  f"{flag} {saved.get(key)} to continue them, or choose another --out")
         for skill, stored in saved.get("skills", {}).items():
-            if skill in now["skills"] and now["skills"][skill] != stored:
+            if skill in now["skills"] and not _same_settings(now["skills"][skill], stored):
                 raise ValueError(f"--scenario / --ground-truth-pose: {skill}'s station or rollout settings differ "
                                  f"from the runs stored in {out}; give the same ones, or choose another --out")
         now["skills"] = {**saved.get("skills", {}), **now["skills"]}
     atomic_write_json(path, now)
+
+
+def _same_settings(now: dict, stored: dict) -> bool:
+    """A skill's station and rollout settings as stored, the station compared by what it builds
+    (:func:`~drake_skill.station.config.same_station`)."""
+    from drake_skill.station.config import same_station
+
+    return now.get("rollout") == stored.get("rollout") and isinstance(stored.get("station"), str) \
+        and same_station(now["station"], stored["station"])
 
 
 def plan_tasks(out: Path, config: GridConfig, specs: dict) -> list[GridTask]:

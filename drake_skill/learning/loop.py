@@ -281,6 +281,10 @@ class LearningRun:
                                     "run without --resume to start")
         saved = load_json(self.out_dir / "config.json", DAMAGED_RUN)
         started_with = saved.pop("versions", None)
+        from drake_skill.station.config import same_station
+
+        if isinstance(saved.get("station"), str) and same_station(saved["station"], self.run_config["station"]):
+            saved["station"] = self.run_config["station"]
         if saved != self.run_config:
             changed = sorted(k for k in set(saved) | set(self.run_config) if saved.get(k) != self.run_config.get(k))
             raise ValueError(f"{self.out_dir}: --resume with different settings than the run it continues "

@@ -28,6 +28,7 @@ from pydrake.geometry import RenderEngineVtkParams
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import ModelDirective, ModelDirectives
 from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.systems.sensors import CameraConfig
 
 from drake_skill import configs
@@ -39,16 +40,11 @@ from drake_skill.station import limits
 #: The model instances every station's directives must add (the object's is named in ``object.model``).
 ROBOT_MODELS = ("panda", "panda_hand", "table")
 #: The robot and the table as Drake model directives (``ProcessModelDirectives``):
-#: the Panda on the world origin, its hand on the flange turned -45 degrees about z,
-#: the table top welded at the world origin. A scenario's ``directives`` add the object.
+#: the Panda with its hand (``ROBOT_FILE``, the one definition of the robot), the
+#: table top welded at the world origin. A scenario's ``directives`` add the object.
+ROBOT_FILE = "package://drake_skill_models/panda_robot.dmd.yaml"
 ROBOT_DIRECTIVES = """
-- add_model: {name: panda, file: "package://drake_skill_models/panda_arm.sdf"}
-- add_weld: {parent: world, child: panda::panda_link0}
-- add_model: {name: panda_hand, file: "package://drake_skill_models/panda_hand.sdf"}
-- add_weld:
-    parent: panda::panda_link8
-    child: panda_hand::panda_hand
-    X_PC: {rotation: !Rpy {deg: [0.0, 0.0, -45.0]}}
+- add_directives: {file: "package://drake_skill_models/panda_robot.dmd.yaml"}
 - add_model: {name: table, file: "package://drake_skill_models/table.sdf"}
 - add_weld: {parent: world, child: table::table_top}
 """
@@ -476,6 +472,8 @@ def load_station_config(path: str | Path | None = None, *, data: str | None = No
     for d in config.directives:                      # a user's model file, relative to the scenario
         if d.add_model is not None and "://" not in d.add_model.file:
             d.add_model.file = "file://" + str((base / d.add_model.file).resolve())
+        if d.add_directives is not None and "://" not in d.add_directives.file:
+            d.add_directives.file = "file://" + str((base / d.add_directives.file).resolve())
     try:
         return validate_station_config(config)
     except ValueError as e:
@@ -487,19 +485,45 @@ def dump_station_config(config: StationConfig) -> str:
     return yaml_dump_typed(config)
 
 
+def same_station(a: str, b: str) -> bool:
+    """Whether two dumped station configs describe the same station: equal text, or equal with every
+    ``add_directives`` of a shipped file written out (a run stored before the robot moved into
+    ``ROBOT_FILE`` wrote its directives in full)."""
+    return a == b or _inlined(a) == _inlined(b)
+
+
+def _inlined(text: str) -> str:
+    from drake_skill.station.models import PACKAGE_NAME, models_dir
+    from pydrake.multibody.parsing import LoadModelDirectives
+
+    config = yaml_load_typed(schema=StationConfig, data=text, defaults=StationConfig())
+    flat = []
+    for d in config.directives:
+        prefix = f"package://{PACKAGE_NAME}/"
+        if d.add_directives is not None and d.add_directives.file.startswith(prefix) \
+                and not d.add_directives.model_namespace:
+            flat += LoadModelDirectives(str(models_dir() / d.add_directives.file[len(prefix):])).directives
+        else:
+            flat.append(d)
+    config.directives = flat
+    return yaml_dump_typed(config)
+
+
 def object_joint_name(config: StationConfig) -> str:
     """The name of the scenario's object joint (the one ``object_state`` reports)."""
     return config.object.joint
 
 
 def _validate_directives(config: StationConfig) -> None:
-    """The robot's model instances and the object's are added; every model file exists."""
+    """Every ``add_model`` file exists; processed, the directives add the robot's model instances and
+    the object's (an included ``add_directives`` file counts)."""
     from drake_skill.station.models import PACKAGE_NAME, models_dir
+    from drake_skill.station.placement import object_parts
 
-    added = {}
     for i, d in enumerate(config.directives):
+        if d.add_directives is not None:
+            _check_file(f"directives[{i}].add_directives.file", d.add_directives.file, "directives")
         if d.add_model is not None:
-            added[d.add_model.name] = i
             url = d.add_model.file
             if url.startswith(f"package://{PACKAGE_NAME}/"):
                 path = models_dir() / url[len(f"package://{PACKAGE_NAME}/"):]
@@ -511,27 +535,37 @@ def _validate_directives(config: StationConfig) -> None:
                      "scenario file")
             if not path.is_file():
                 _bad(f"directives[{i}].add_model.file", url, f"an existing model file ({path} does not exist)")
+    plant = _directives_plant(_directives_key(config.directives))
+    added = sorted(plant.GetModelInstanceName(ModelInstanceIndex(i)) for i in range(2, plant.num_model_instances()))
     for name in ROBOT_MODELS:
         if name not in added:
-            _bad("directives", sorted(added), f"the robot's models ({', '.join(ROBOT_MODELS)}): "
-                 "start the list with the robot's directives (drake_skill/station/config.py ROBOT_DIRECTIVES)")
+            _bad("directives", added, f"the robot's models ({', '.join(ROBOT_MODELS)}): start the list with the "
+                 f"robot's directives (drake_skill/station/config.py ROBOT_DIRECTIVES: {ROBOT_FILE} and the table)")
     obj = config.object
     if obj.model not in added:
-        _bad("object.model", obj.model, f"the name of a model the directives add ({', '.join(sorted(added))})")
+        _bad("object.model", obj.model, f"the name of a model the directives add ({', '.join(added)})")
     for field in ("base_body", "joint"):
         if not getattr(obj, field):
             _bad(f"object.{field}", getattr(obj, field), f"the name of the object model's {field.replace('_', ' ')}")
-    from drake_skill.station.placement import object_parts
-
-    plant = _directives_plant(_directives_key(config.directives))
     object_parts(plant, plant.GetModelInstanceByName(obj.model), config)
 
 
+def _check_file(field: str, url: str, what: str) -> None:
+    from drake_skill.station.models import PACKAGE_NAME, models_dir
+
+    prefix = f"package://{PACKAGE_NAME}/"
+    path = models_dir() / url[len(prefix):] if url.startswith(prefix) else \
+        Path(url[len("file://"):]) if url.startswith("file://") else None
+    if path is not None and not path.is_file():
+        _bad(field, url, f"an existing {what} file ({path} does not exist)")
+
+
 def _directives_key(directives) -> tuple:
-    """The directives' text and the modification times of the user's model files (``file://``):
+    """The directives' text and the modification times of the user's model and directive files (``file://``):
     a scenario whose files did not change is parsed once per process."""
-    files = [d.add_model.file[len("file://"):] for d in directives
-             if d.add_model is not None and d.add_model.file.startswith("file://")]
+    urls = [d.add_model.file if d.add_model is not None else d.add_directives.file
+            if d.add_directives is not None else "" for d in directives]
+    files = [url[len("file://"):] for url in urls if url.startswith("file://")]
     return yaml_dump_typed(ModelDirectives(directives=list(directives))), \
         tuple(Path(f).stat().st_mtime_ns for f in files)
 

@@ -15,24 +15,25 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.math import RigidTransform
 from pydrake.multibody.inverse_kinematics import (
     DifferentialInverseKinematicsIntegrator,
     DifferentialInverseKinematicsParameters,
 )
-from pydrake.multibody.parsing import Parser
+from pydrake.multibody.parsing import ModelDirectives, Parser, ProcessModelDirectives
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import FixedOffsetFrame
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 
 from drake_skill.station import limits
-from drake_skill.station.models import add_package_paths, model_url
+from drake_skill.station.models import add_package_paths, hand_mount, robot_directives
 from drake_skill.station.config import ControllerConfig
 
-# Hand frame H is the flange turned -45 degrees about z (Franka Hand mounting);
+# Hand frame H is the flange turned -45 degrees about z (Franka Hand mounting; the
+# robot's directives, models/panda_robot.dmd.yaml, say so once and X_FLANGE_HAND reads it);
 # the tool centre point E (the "hand pose" everywhere in drake-skill) is
 # 0.1034 m along z_H, between the fingertips.
-X_FLANGE_HAND = RigidTransform(RotationMatrix.MakeZRotation(-np.pi / 4))
+X_FLANGE_HAND = hand_mount()
 X_HAND_TCP = RigidTransform([0.0, 0.0, 0.1034])
 
 # Kept for callers of the previous name; the one definition is limits.QD_MAX.
@@ -42,29 +43,28 @@ PANDA_QD_MAX = limits.QD_MAX
 FINGER_ACCEL_MAX = 4.0
 
 
-def add_arm_and_hand(plant: MultibodyPlant) -> tuple:
-    """Adds the Panda arm (base welded to the world) and its hand (welded to the
-    flange with ``X_FLANGE_HAND``) to an unfinalised ``plant``; returns the two
-    model instances. The stations' own plants come from scenario directives; this
-    is for the auxiliary plants (gravity compensation, the hardware station's
-    drawing) that need the same arm and hand."""
+def _robot_plant(plant: MultibodyPlant, instances) -> None:
     parser = Parser(plant)
     add_package_paths(parser.package_map())
-    arm = parser.AddModels(url=model_url("panda_arm.sdf"))[0]
-    hand = parser.AddModels(url=model_url("panda_hand.sdf"))[0]
-    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", arm))
-    plant.WeldFrames(plant.GetFrameByName("panda_link8", arm), plant.GetFrameByName("panda_hand", hand),
-                     X_FLANGE_HAND)
-    return arm, hand
+    ProcessModelDirectives(ModelDirectives(directives=robot_directives(instances)), plant, parser)
+
+
+def add_arm_and_hand(plant: MultibodyPlant) -> tuple:
+    """Adds the Panda arm (base welded to the world) and its hand (welded to the
+    flange with ``X_FLANGE_HAND``) to an unfinalised ``plant`` from the robot's
+    directives (``station.models.ROBOT_FILE``); returns the two model instances.
+    The stations' own plants come from the scenario's directives, which include
+    the same file; this is for the auxiliary plants (gravity compensation, the
+    hardware station's drawing) that need the same arm and hand."""
+    _robot_plant(plant, ("panda", "panda_hand"))
+    return plant.GetModelInstanceByName("panda"), plant.GetModelInstanceByName("panda_hand")
 
 
 def make_control_plant() -> MultibodyPlant:
-    """A 7-DoF kinematic model of the arm with the TCP frame named ``ee``."""
+    """A 7-DoF kinematic model of the arm (the robot's directives, the arm alone) with the TCP
+    frame named ``ee``."""
     plant = MultibodyPlant(time_step=0.0)
-    parser = Parser(plant)
-    add_package_paths(parser.package_map())
-    parser.AddModels(url=model_url("panda_arm.sdf"))
-    plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0"))
+    _robot_plant(plant, ("panda",))
     plant.AddFrame(FixedOffsetFrame("ee", plant.GetFrameByName("panda_link8"),
                                     X_FLANGE_HAND @ X_HAND_TCP))
     plant.Finalize()

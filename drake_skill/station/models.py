@@ -103,6 +103,31 @@ def process_directives(directives, plant, parser) -> None:
         raise ValueError(f"{where}: {_short_reason(str(e), directive)}; fix that directive") from None
 
 
+ROBOT_FILE = "panda_robot.dmd.yaml"
+"""The robot's model directives (the arm and its hand; models folder): the one definition."""
+
+
+def robot_directives(instances=("panda", "panda_hand")) -> list:
+    """``ROBOT_FILE``'s directives that add or weld the model instances ``instances`` (as Drake's
+    ``MakeMultibodyPlant(scenario, model_instance_names)`` keeps a scenario's): a controller's plant of
+    the arm alone takes ``("panda",)``."""
+    from pydrake.multibody.parsing import LoadModelDirectives
+
+    kept = []
+    for d in LoadModelDirectives(str(model_path(ROBOT_FILE))).directives:
+        name = d.add_model.name if d.add_model is not None else d.add_weld.child.split("::")[0]
+        if name in instances:
+            kept.append(d)
+    return kept
+
+
+def hand_mount():
+    """X_FH, the hand's pose on the flange (``panda_link8``), from ``ROBOT_FILE``'s weld."""
+    (weld,) = [d.add_weld for d in robot_directives() if d.add_weld is not None
+               and d.add_weld.child == "panda_hand::panda_hand"]
+    return weld.X_PC.GetDeterministicValue()
+
+
 PANDA_ILLUSTRATION = "franka_panda/panda_illustration.yaml"
 """The table of Franka's visual meshes per Panda body (in the models folder)."""
 
