@@ -128,6 +128,24 @@ def write_figure_png(fig, path: str | os.PathLike, **savefig_kwargs) -> Path:
 
 
 # ------------------------------------------------------------------ directories
+def pack_folder(folder) -> dict[str, bytes]:
+    """Every file under ``folder``: {relative POSIX path: bytes}, in sorted order."""
+    folder = Path(folder)
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def unpack_folder(files: dict[str, bytes], folder) -> Path:
+    """Writes ``files`` (``pack_folder``'s) under ``folder`` (made if missing)."""
+    folder = Path(folder)
+    for name, data in files.items():
+        path = folder / name
+        if Path(name).is_absolute() or ".." in Path(name).parts:
+            raise ValueError(f"{name}: a packed file's name leaves its folder")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(data)
+    return folder
+
+
 def file_sha256(path: str | os.PathLike) -> str:
     """Hex SHA-256 of a file's bytes."""
     import hashlib

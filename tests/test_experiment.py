@@ -204,6 +204,36 @@ def test_the_grid_on_local_ray_gives_the_process_pool_numbers(grid, tmp_path):
     outcome = _grid(shared, tmp_path / "ray", use_ray=True)
     assert outcome.failed == [] and outcome.ran == 4
     assert (tmp_path / "ray" / "table.csv").read_bytes() == (out / "table.csv").read_bytes()
+    # The runs came back through Ray and the driver stored them: the same folders, and the same
+    # config.json (naming the driver's skill folder, not the worker's copy).
+    for method in ("power", "pi2-es-cov"):
+        pool_run, ray_run = (run_dir(o, "close", method, "dense", 1) for o in (out, tmp_path / "ray"))
+        assert sorted(p.name for p in ray_run.iterdir()) == sorted(p.name for p in pool_run.iterdir())
+        assert json.loads((ray_run / "config.json").read_text())["skill_dir"] == \
+            str((tmp_path / "ray" / "close" / "initial_skill").resolve())
+
+
+def test_a_ray_task_needs_nothing_under_out_and_only_the_driver_writes_there(grid, tmp_path):
+    """Issue 48 item 1: what a Ray worker runs (execute_remote) reads and writes nothing under --out
+    (here moved away while it runs), and the driver's store gives the process pool's file."""
+    import pickle
+
+    from drake_skill.experiments.grid import _runner_specs
+    from drake_skill.experiments.remote import execute_remote, remote_tasks, store_result
+
+    shared, out, _ = grid
+    config = GridConfig(**CONFIG).validate()
+    new = tmp_path / "out"
+    specs = _runner_specs(new, config, shared["skill_dir"], shared["station_yaml"], rollout_config(), True)
+    (task,) = [t for t in plan_tasks(new, config, specs) if t.kind == "before"]
+    remote, skills = remote_tasks([task])
+    assert str(new).encode() not in pickle.dumps(remote[0]).replace(str(new / "close" / "initial_skill").encode(), b"")
+    assert remote[0].task.path == ""     # (the skill folder goes only as the label for config.json)
+    new.rename(tmp_path / "away")                  # the worker's node has no --out at all
+    payload = execute_remote(remote[0], pickle.loads(pickle.dumps(skills)))
+    (tmp_path / "away").rename(new)
+    store_result(task, payload)
+    assert Path(task.path).read_bytes() == (out / "close" / "held_out_before.json").read_bytes()
 
 
 def test_skills_are_names_or_skill_files(tmp_path):

@@ -442,16 +442,39 @@ def run_grid(out, config: GridConfig, *, skill_dir=None, station_yaml=None, roll
 
 def _execute(tasks, workers: int, use_ray: bool, ray_address, progress) -> None:
     """Runs ``tasks`` on Ray or worker processes; ``progress``: (on_done, close)."""
-    from drake_skill.experiments.pool import run_on_processes, run_on_ray
+    from drake_skill.experiments.pool import run_on_processes
 
     on_done, close = progress
     try:
         if use_ray or ray_address:
-            run_on_ray(tasks, execute_task, workers, on_done, address=ray_address)
+            _execute_on_ray(tasks, workers, ray_address, on_done)
         else:
             run_on_processes(tasks, execute_task, workers, on_done)
     finally:
         close()
+
+
+def _execute_on_ray(tasks, workers: int, ray_address, on_done) -> None:
+    """The tasks on Ray with nothing shared but Ray: the skills go through its object store, the
+    results come back in the tasks' returns, and this process stores them
+    (:mod:`~drake_skill.experiments.remote`)."""
+    from drake_skill.experiments.pool import run_on_ray
+    from drake_skill.experiments.remote import execute_remote, remote_tasks, store_result
+
+    remote, skills = remote_tasks(tasks)
+    origin = {id(r): t for r, t in zip(remote, tasks)}
+
+    def stored(r, payload, error):
+        task = origin[id(r)]
+        if payload is None:
+            return on_done(task, None, error)
+        try:
+            summary = store_result(task, payload)
+        except OSError as e:
+            return on_done(task, None, f"storing the result under --out failed: {e}")
+        on_done(task, summary, None)
+
+    run_on_ray(remote, execute_remote, workers, stored, address=ray_address, shared=(skills,))
 
 
 def _runner_specs(out: Path, config: GridConfig, skill_dir, station_yaml, rollout_config, quiet: bool) -> dict:

@@ -158,13 +158,14 @@ def ray_or_error(option: str = "--ray"):
 
 
 def run_on_ray(tasks: Sequence, fn: Callable, workers: int, on_done: OnDone, address: str | None = None,
-               max_attempts: int = MAX_ATTEMPTS) -> None:
-    """Runs ``fn(task)`` for every task as Ray tasks of one CPU each.
+               max_attempts: int = MAX_ATTEMPTS, shared: tuple = ()) -> None:
+    """Runs ``fn(task, *shared)`` for every task as Ray tasks of one CPU each.
 
-    ``address``: an existing cluster ("auto", "ray://host:port"; every node
-    must see the output folder at the same path), or None for a local
-    ``ray.init`` with ``workers`` CPUs (shut down at the end). A task whose
-    worker died is retried by Ray, ``max_attempts - 1`` times.
+    ``address``: an existing cluster ("auto", "ray://host:port"; nothing on
+    disk is shared: ``shared`` goes to every task through Ray's object store,
+    put once), or None for a local ``ray.init`` with ``workers`` CPUs (shut
+    down at the end). A task whose worker died is retried by Ray,
+    ``max_attempts - 1`` times.
     """
     ray = ray_or_error("--ray-address" if address else "--ray")
     owns = not ray.is_initialized()
@@ -178,7 +179,8 @@ def run_on_ray(tasks: Sequence, fn: Callable, workers: int, on_done: OnDone, add
             ray.init(num_cpus=int(workers), include_dashboard=False, **options)
     remote = ray.remote(num_cpus=1, max_retries=int(max_attempts) - 1)(fn)
     try:
-        refs = {remote.remote(task): task for task in tasks}
+        shared_refs = [ray.put(value) for value in shared]
+        refs = {remote.remote(task, *shared_refs): task for task in tasks}
         while refs:
             ready, _ = ray.wait(list(refs), num_returns=1)
             for ref in ready:

@@ -306,14 +306,20 @@ def ray_available() -> bool:
 
 
 class _RayWorkerImpl:
-    """Body of the Ray actor: one runner, built once."""
+    """Body of the Ray actor: one runner, built once, from the skill's files as the driver sent them
+    (written into the actor's own temporary folder: no node needs the driver's disk)."""
 
-    def __init__(self, spec: RunnerSpec):
+    def __init__(self, spec: RunnerSpec, skill_files: dict[str, bytes]):
+        import tempfile
+
+        from drake_skill.fileio import unpack_folder
+
         for key, value in _WORKER_ENV.items():
             os.environ.setdefault(key, value)
         if spec.quiet_ik:
             _quiet_ik()
-        self._runner = spec.build()
+        folder = unpack_folder(skill_files, tempfile.mkdtemp(prefix="drake_skill_skill_"))
+        self._runner = dc.replace(spec, skill_dir=str(folder)).build()
 
     def run(self, weights, seed):
         return self._runner.run(np.asarray(weights, dtype=float), int(seed))
@@ -324,7 +330,9 @@ class RayPool(_Pool):
 
     ``address``: an existing Ray cluster ("auto" or "ray://host:port"); None
     starts a local Ray with ``ray.init()`` (and shuts it down on close).
-    ``num_cpus`` per actor: 1.
+    ``num_cpus`` per actor: 1. The skill goes to the actors through Ray's
+    object store and the results come back as the tasks' returns: nothing
+    on disk is shared.
     """
 
     def __init__(self, spec: RunnerSpec, n_workers: int, address: str | None = None):
@@ -344,8 +352,11 @@ class RayPool(_Pool):
                 ray.init(num_cpus=max(int(n_workers), 1), include_dashboard=False, log_to_driver=False)
                 self._owns_ray = True
         self.n_workers = int(n_workers)
+        from drake_skill.fileio import pack_folder
+
         actor = ray.remote(num_cpus=1)(_RayWorkerImpl)
-        self._actors = [actor.remote(spec) for _ in range(self.n_workers)]
+        skill_files = ray.put(pack_folder(spec.skill_dir))      # once, through the object store
+        self._actors = [actor.remote(spec, skill_files) for _ in range(self.n_workers)]
 
     def map(self, tasks, progress=None):
         ray = self._ray
