@@ -269,3 +269,19 @@ def test_a_grid_prepares_a_skill_on_the_skill_s_scenario_under_its_scenario_file
     assert prepare_config("draw").station_for(spec).object.x == 0.68
 
 
+
+
+def test_an_unreachable_ray_address_is_one_line_within_seconds(tmp_path, capsys):
+    """Issue 48's bad input: a --ray-address nothing answers at ends as one line where the value enters,
+    in seconds (ray.init alone retries for minutes), before anything is written to --out."""
+    import socket
+
+    with socket.socket() as s:          # a loopback port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    for argv in (["experiment", "run", "--skills", "close"], ["learn", "--skill", "close"]):
+        assert main([*argv, "--ray-address", f"127.0.0.1:{port}", "--out", str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert f"argument --ray-address: 127.0.0.1:{port}: nothing answers there within 5 s" in err
+        assert err.count("\n") == 1
+    assert not (tmp_path / "out").exists()

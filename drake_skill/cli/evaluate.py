@@ -61,7 +61,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=None,
                         help="rollout worker processes (default: one per CPU this process may use, "
                              f"{default_workers()} here)")
-    parser.add_argument("--ray-address", default=None, help="run on Ray actors of this cluster")
+    parser.add_argument("--ray-address", default=None, type=options.ray_address,
+                        help="run on Ray actors of this cluster")
     options.add_ground_truth_pose(parser)
     parser.add_argument("--all-demos", action="store_true",
                         help="evaluate every demonstration's DMP (its weights, goal and duration): "

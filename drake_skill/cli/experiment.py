@@ -114,7 +114,7 @@ def _add_run_arguments(run_p: argparse.ArgumentParser) -> None:
     where.add_argument("--workers", type=int, default=None,
                        help=f"runs at a time (default: one per CPU this process may use, {default_workers()} here)")
     where.add_argument("--ray", action="store_true", help="run on a local Ray (needs pip install ray)")
-    where.add_argument("--ray-address", default=None,
+    where.add_argument("--ray-address", default=None, type=options.ray_address,
                        help="run on this Ray cluster ('auto', 'ray://host:port'; OUT on a shared path)")
     where.add_argument("--out", type=Path, default=DEFAULT_OUT, help=f"grid folder (default {DEFAULT_OUT})")
     where.add_argument("--keep-skills", action="store_true",

@@ -99,7 +99,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument("--workers", type=int, default=None,
                         help="rollout worker processes (default: one per CPU this process may use, "
                              f"{default_workers()} here)")
-    run.add_argument("--ray-address", default=None,
+    run.add_argument("--ray-address", default=None, type=options.ray_address,
                      help="run rollouts on Ray actors of this cluster ('auto', 'ray://host:port'; "
                           "needs pip install ray)")
     run.add_argument("--ray", action="store_true", help="run rollouts on Ray actors of a local ray.init()")

@@ -23,3 +23,16 @@ def rollout_config(args: argparse.Namespace, camera: bool = True):
 
     perceived = camera and not args.ground_truth_pose
     return RolloutConfig(object_pose="perceived" if perceived else "ground_truth", goal_model=camera)
+
+
+def ray_address(text: str) -> str:
+    """``--ray-address``'s type: 'auto', or an address that answers within 5 s (checked where the value
+    enters, before any work: ``ray.init`` would retry a dead address for minutes)."""
+    if text != "auto":
+        from drake_skill.learning.workers import check_ray_address
+
+        try:
+            check_ray_address(text)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e).removeprefix("--ray-address ")) from None
+    return text

@@ -167,16 +167,10 @@ def run_on_ray(tasks: Sequence, fn: Callable, workers: int, on_done: OnDone, add
     down at the end). A task whose worker died is retried by Ray,
     ``max_attempts - 1`` times.
     """
-    ray = ray_or_error("--ray-address" if address else "--ray")
-    owns = not ray.is_initialized()
-    if owns:
-        from drake_skill.learning.workers import _WORKER_ENV
+    from drake_skill.learning.workers import _WORKER_ENV, connect_ray
 
-        options = {"runtime_env": {"env_vars": dict(_WORKER_ENV)}, "log_to_driver": False}
-        if address:
-            ray.init(address=address, **options)
-        else:
-            ray.init(num_cpus=int(workers), include_dashboard=False, **options)
+    ray = ray_or_error("--ray-address" if address else "--ray")
+    owns = connect_ray(address, workers, runtime_env={"env_vars": dict(_WORKER_ENV)}, log_to_driver=False)
     remote = ray.remote(num_cpus=1, max_retries=int(max_attempts) - 1)(fn)
     try:
         shared_refs = [ray.put(value) for value in shared]

@@ -305,6 +305,54 @@ def ray_available() -> bool:
     return True
 
 
+#: How long an address is given to answer before ``--ray-address`` is an error [s].
+RAY_CONNECT_TIMEOUT_S = 5.0
+
+
+def check_ray_address(address: str, timeout: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """A TCP connection to ``host:port`` (or ``ray://host:port``) within ``timeout`` s, or a
+    one-line ValueError: ``ray.init`` itself retries an address that does not answer for minutes."""
+    import socket
+
+    hostport = address.split("://", 1)[-1]
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():
+        raise ValueError(f"--ray-address {address}: expected 'auto', HOST:PORT or ray://HOST:PORT")
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as e:
+        raise ValueError(f"--ray-address {address}: nothing answers there within {timeout:g} s ({e}); start the "
+                         "cluster (ray start --head) and give its address, or leave --ray-address out to run "
+                         "here") from None
+
+
+def connect_ray(address: str | None, n_cpus: int, **options) -> bool:
+    """``ray.init`` on the cluster at ``address`` (probed first, bounded in time) or, with None, a
+    local one of ``n_cpus`` CPUs; True when this call started Ray (the caller shuts it down). A
+    cluster with no free CPU is a one-line ValueError (its tasks would wait forever)."""
+    import ray
+
+    if ray.is_initialized():
+        return False
+    if not address:
+        ray.init(num_cpus=max(int(n_cpus), 1), include_dashboard=False, **options)
+        return True
+    if address != "auto":
+        check_ray_address(address)
+    try:
+        ray.init(address=address, **options)
+    except ConnectionError as e:
+        raise ValueError(f"--ray-address {address}: {' '.join(str(e).split())[:200]}; start the cluster "
+                         "(ray start --head), or leave --ray-address out to run here") from None
+    free = ray.available_resources().get("CPU", 0.0)
+    if free < 1.0:
+        total = ray.cluster_resources().get("CPU", 0.0)
+        ray.shutdown()
+        raise ValueError(f"--ray-address {address}: the cluster has no free CPU ({total:g} in all, {free:g} free); "
+                         "free some, add a node, or leave --ray-address out to run here")
+    return True
+
+
 class _RayWorkerImpl:
     """Body of the Ray actor: one runner, built once, from the skill's files as the driver sent them
     (written into the actor's own temporary folder: no node needs the driver's disk)."""
@@ -344,13 +392,7 @@ class RayPool(_Pool):
         if int(n_workers) < 1:
             raise ValueError(f"workers: expected >= 1, got {n_workers}")
         self._ray = ray
-        self._owns_ray = False
-        if not ray.is_initialized():
-            if address:
-                ray.init(address=address, log_to_driver=False)
-            else:
-                ray.init(num_cpus=max(int(n_workers), 1), include_dashboard=False, log_to_driver=False)
-                self._owns_ray = True
+        self._owns_ray = connect_ray(address, n_workers, log_to_driver=False) and not address
         self.n_workers = int(n_workers)
         from drake_skill.fileio import pack_folder
 
