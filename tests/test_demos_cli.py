@@ -3,6 +3,7 @@
 import base64
 import json
 import re
+import sys
 
 import h5py
 import numpy as np
@@ -265,3 +266,35 @@ def test_read_of_perception_and_damaged_bytes(tmp_path):
         read_robomimic(target)
     assert str(e.value) == (f"{target}: damaged HDF5 (ValueError: could not convert string to float: 'abc'); "
                             "export it again with 'drake-skill demos export DIR OUT.hdf5'")
+
+
+def test_robomimic_edges_found_by_mutation(tmp_path, monkeypatch):
+    from drake_skill.demos import robomimic
+
+    # Metadata is written with sorted keys, whatever order the demonstration holds them in.
+    demo = make_demo(0, perception=False)
+    demo.metadata = {"z": 1, "a": {"y": 2, "b": 3}}
+    path, _ = _export(tmp_path, [demo])
+    with h5py.File(path, "r") as f:
+        assert f["data/demo_0/drake_skill"].attrs["metadata"] == '{"a": {"b": 3, "y": 2}, "z": 1}'
+    # Importing over existing demonstrations needs force.
+    with pytest.raises(FileExistsError, match="pass --force"):
+        robomimic.import_robomimic(path, tmp_path / "set")
+    # 10 Hz times past the last raw one are the named error, not an IndexError.
+    late = make_demo(0, perception=False, n=31)
+    late.times = late.times + np.r_[0.0, 0.0, 0.0, 0.005]
+    late.path = "late.npz"
+    with pytest.raises(DemonstrationError, match="late.npz: field 'times' is not a subset of times_100hz"):
+        robomimic._sample_indices(late)
+    # A file h5py cannot open: its reason in one line, as h5py gives it.
+    text = tmp_path / "text.hdf5"
+    text.write_text("x")
+    with pytest.raises(ValueError) as e:
+        robomimic.read_robomimic(text)
+    assert str(e.value).startswith(f"{text}: not a readable HDF5 file (Unable to synchronously open file (file "
+                                   "signature not found)): a file cut short or of another format")
+    # Without h5py: the named ImportError.
+    monkeypatch.setitem(sys.modules, "h5py", None)
+    with pytest.raises(ImportError) as e:
+        robomimic._h5py()
+    assert str(e.value) == "the robomimic format needs h5py: pip install 'h5py>=3.10'"
