@@ -376,8 +376,18 @@ def test_bands_of_no_runs_and_of_three(monkeypatch):
     report.plot_dense([three, none], "s", "d.png")
     ax = saved.pop().axes[0]
     np.testing.assert_array_equal(ax.get_lines()[1].get_ydata(), [np.nan] * 3)
+    assert ax.get_ylim() == (-0.05, 1.05) and ax.xaxis.get_gridlines()[0].get_alpha() == 0.3
+    assert ax.title.get_fontsize() == 10
     mean, sd = np.array([2, 3, 2]) / 3, np.std([[0, 1, 1], [1, 1, 0], [1, 1, 1]], axis=0, ddof=1)
     y = ax.collections[0].get_paths()[0].vertices[:, 1]
     for value in np.r_[np.clip(mean - sd, 0, 1), np.clip(mean + sd, 0, 1)]:
         assert np.any(np.abs(y - value) < 1e-12), value
     assert np.any(np.abs(y - (mean[0] - sd[0])) < 1e-12) and mean[0] - sd[0] > 0.05      # not clipped
+
+
+def test_a_cell_without_runs_has_dashes_in_its_row():
+    from drake_skill.experiments.report import _skill_section
+
+    none = Cell("s", "pi2", "dense", [], np.zeros((0, 2), dtype=int), [], 0.5)
+    lines = _skill_section([none], "s")
+    assert lines[6] == "| pi2 | dense | 0 | - | - | - | - |"
