@@ -237,14 +237,20 @@ def test_results_markdown_in_full():
     assert with_notes == EXPECTED_MD + "\n## Notes (`notes.md`, written by hand beside the table)\n\nFound: x.\n"
 
 
-def test_write_report_files_and_errors(tmp_path):
+def test_write_report_files_and_errors(tmp_path, monkeypatch):
     from drake_skill.experiments.report import results_markdown, cells_from_rows, write_report
     from drake_skill.experiments.table import table_text
 
     grid = tmp_path / "grid"
     grid.mkdir()
     (grid / "table.csv").write_text(table_text(_rows()))
+    from drake_skill.experiments import report
+
+    titles = []
+    real_save = report._save
+    monkeypatch.setattr(report, "_save", lambda fig, path: titles.append(fig.axes[0].get_title()) or real_save(fig, path))
     written = write_report(grid)
+    assert titles == ["pi2", "close: every method, dense reward", "power", "open: every method, dense reward"]
     assert [p.name for p in written] == ["close_methods.png", "close_dense.png", "open_methods.png",
                                          "open_dense.png", "results.md"]
     assert all(p.parent == grid and p.is_file() for p in written)
@@ -371,18 +377,31 @@ def test_bands_of_no_runs_and_of_three(monkeypatch):
 
     saved = []
     monkeypatch.setattr(report, "_save", lambda fig, path: saved.append(fig) or path)
-    three = report.Cell("s", "pi2", "dense", [0, 1, 2], np.array([[0, 1, 1], [1, 1, 0], [1, 1, 1]]), [None] * 3, None)
+    runs = np.array([[0, 0, 1], [1, 0, 0], [1, 1, 1]])
+    three = report.Cell("s", "pi2", "dense", [0, 1, 2], runs, [None] * 3, None)
     none = report.Cell("s", "power", "dense", [], np.zeros((0, 3), dtype=int), [], None)
-    report.plot_dense([three, none], "s", "d.png")
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)          # no mean of an empty slice
+        report.plot_dense([three, none], "s", "d.png")
     ax = saved.pop().axes[0]
     np.testing.assert_array_equal(ax.get_lines()[1].get_ydata(), [np.nan] * 3)
     assert ax.get_ylim() == (-0.05, 1.05) and ax.xaxis.get_gridlines()[0].get_alpha() == 0.3
     assert ax.title.get_fontsize() == 10
-    mean, sd = np.array([2, 3, 2]) / 3, np.std([[0, 1, 1], [1, 1, 0], [1, 1, 1]], axis=0, ddof=1)
-    y = ax.collections[0].get_paths()[0].vertices[:, 1]
-    for value in np.r_[np.clip(mean - sd, 0, 1), np.clip(mean + sd, 0, 1)]:
-        assert np.any(np.abs(y - value) < 1e-12), value
-    assert np.any(np.abs(y - (mean[0] - sd[0])) < 1e-12) and mean[0] - sd[0] > 0.05      # not clipped
+    mean, sd = runs.mean(axis=0), runs.std(axis=0, ddof=1)
+    low, high = np.clip(mean - sd, 0, 1), np.clip(mean + sd, 0, 1)
+    assert low[1] == 0.0 and 0 < low[0] < 0.1 and high[0] == 1.0 and 0.9 < high[1] < 1.0   # clipped and not
+    vertices = {(round(x, 9), round(y, 9)) for x, y in ax.collections[0].get_paths()[0].vertices}
+    assert vertices == {(float(i), round(v, 9)) for i in range(3) for v in (low[i], high[i])}
+    # A panel of a sparse cell alone: orange, dashed, its band orange too.
+    sparse = report.Cell("s", "pi2", "sparse", [0, 1, 2], runs, [None] * 3, None)
+    report.plot_methods([sparse], "s", "m.png")
+    ax = saved.pop().axes[0]
+    from matplotlib.colors import to_rgba
+
+    assert to_rgba(ax.get_lines()[0].get_color()) == to_rgba("tab:orange")
+    assert tuple(ax.collections[0].get_facecolor()[0][:3]) == to_rgba("tab:orange")[:3]
 
 
 def test_a_cell_without_runs_has_dashes_in_its_row():
