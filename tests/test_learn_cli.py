@@ -150,6 +150,18 @@ def test_evaluate_the_learned_skill(learned, capsys):
     assert policy["reasons"] == held["reasons"]
     assert sum(reason != "" for reason in policy["reasons"]) == sum(policy["failures"].values())
     assert (out / "skill" / "evaluation.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # The evaluation's rollouts are kept beside its report, with what a replay builds its runner from;
+    # they are the same executions as learn's held-out after (the same weights and poses).
+    from drake_skill.learning.rollout_store import load_rollout, rollouts_path
+
+    index = report["initial_index"]
+    kept = load_rollout(rollouts_path(out / "skill", f"evaluation_dmp_{index}"), 1)
+    after = load_rollout(rollouts_path(out, "held_out_after"), 1)
+    assert kept["seed"] == 900001 and kept["meta"]["skill_dir"] == str((out / "skill").resolve())
+    np.testing.assert_array_equal(kept["weights"], after["weights"])
+    np.testing.assert_array_equal(kept["ee_pose"], after["ee_pose"])
+    assert main(["replay", str(out / "skill"), "--list"]) == 0
+    assert capsys.readouterr().out == f"evaluation_dmp_{index}: 2 rollouts\n"
 
 
 def test_the_placement_plot_marks_every_outcome(tmp_path):
