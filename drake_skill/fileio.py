@@ -127,6 +127,22 @@ def write_figure_png(fig, path: str | os.PathLike, **savefig_kwargs) -> Path:
     return atomic_write_bytes(path, buf.getvalue())
 
 
+def png_data_url(image=None, *, fig=None) -> str:
+    """A ``data:image/png;base64,...`` URL of an (h, w, 3) uint8 ``image`` or of a matplotlib ``fig``:
+    images inline in a self-contained HTML page (``report.html``, ``fit_report.html``)."""
+    import base64
+    import io
+
+    buf = io.BytesIO()
+    if fig is not None:
+        fig.savefig(buf, format="png")
+    else:
+        import matplotlib.image
+
+        matplotlib.image.imsave(buf, np.asarray(image, dtype=np.uint8), format="png")
+    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
+
+
 # ------------------------------------------------------------------ directories
 def pack_folder(folder) -> dict[str, bytes]:
     """Every file under ``folder``: {relative POSIX path: bytes}, in sorted order."""

@@ -21,13 +21,12 @@ from __future__ import annotations
 
 import base64
 import html
-import io
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from drake_skill.fileio import atomic_write_text
+from drake_skill.fileio import atomic_write_text, png_data_url
 from drake_skill.learning.rollout_store import load_rollout, rollouts_path
 
 __all__ = ["WORST", "worst_ranked", "write_run_report"]
@@ -51,15 +50,6 @@ def worst_ranked(records: Sequence[Mapping[str, Any]], n: int = WORST) -> tuple[
     return failures, successes
 
 
-def _png(image: np.ndarray) -> str:
-    """A data URL of an (h, w, 3) uint8 image as PNG."""
-    import matplotlib.image
-
-    buf = io.BytesIO()
-    matplotlib.image.imsave(buf, np.asarray(image, dtype=np.uint8), format="png")
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
-
-
 def _file_img(path: Path) -> str:
     if not path.is_file():
         return ""
@@ -77,7 +67,8 @@ def _last_frame(out_dir: Path, record: Mapping) -> np.ndarray | None:
 
 def _figure(out_dir: Path, record: Mapping, caption: str) -> str:
     frame = _last_frame(out_dir, record)
-    img = f'<img alt="last frame" src="{_png(frame)}">' if frame is not None and frame.size else "(no frame kept)"
+    kept = frame is not None and frame.size
+    img = f'<img alt="last frame" src="{png_data_url(frame)}">' if kept else "(no frame kept)"
     command = f"drake-skill replay {out_dir} --episode {record['episode']} --index {record['index']}"
     return (f"<figure>{img}<figcaption>episode {record['episode']}, rollout {record['index']}<br>"
             f"{html.escape(caption)}<br><code>{html.escape(command)}</code></figcaption></figure>")

@@ -32,15 +32,13 @@ Demonstrations that store no perception have no goal panel.
 
 from __future__ import annotations
 
-import base64
 import dataclasses as dc
 import html
-import io
 from pathlib import Path
 
 import numpy as np
 
-from drake_skill.fileio import atomic_write_text
+from drake_skill.fileio import atomic_write_text, png_data_url
 
 __all__ = ["KEPT_WARN", "MIN_WARN_S", "SegmentTrack", "segment_tracks", "segment_warnings", "track_segment",
            "write_fit_report"]
@@ -208,20 +206,6 @@ def segment_tracks(skill, demos, station_config=None) -> tuple[dict, list[str]]:
 
 
 # ----------------------------------------------------------------------------- the page
-def _png(fig) -> str:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
-
-
-def _image_png(image: np.ndarray) -> str:
-    import matplotlib.image
-
-    buf = io.BytesIO()
-    matplotlib.image.imsave(buf, image, format="png")
-    return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
-
-
 def _demo_figure(skill, demo, track: SegmentTrack | None) -> str:
     """The kept fraction, the goal features and the goal model's state over time, as one PNG."""
     from drake_skill.fileio import new_figure
@@ -252,7 +236,7 @@ def _demo_figure(skill, demo, track: SegmentTrack | None) -> str:
         axes[i + 1].set_yticks(range(smoothed.shape[1]))
     axes[-1].set_xlabel("time from the demonstration's start [s]")
     fig.tight_layout()
-    return f'<img alt="over time" src="{_png(fig)}">'
+    return f'<img alt="over time" src="{png_data_url(fig=fig)}">'
 
 
 def _facts(demo, refinement: dict | None) -> str:
@@ -269,7 +253,7 @@ def _facts(demo, refinement: dict | None) -> str:
 
 
 def _snapshots(track: SegmentTrack) -> str:
-    return "".join(f'<figure><img alt="{html.escape(w)}" src="{_image_png(img)}"><figcaption>{html.escape(w)}, '
+    return "".join(f'<figure><img alt="{html.escape(w)}" src="{png_data_url(img)}"><figcaption>{html.escape(w)}, '
                    f"t = {t:.1f} s</figcaption></figure>" for w, t, img in track.snapshots)
 
 
