@@ -322,7 +322,7 @@ def test_scenario_paths_and_load_errors(tmp_path):
         load_skill("jump")
     assert str(e.value) == (f"skill 'jump': not a shipped skill ({names}) and not a file; give one of those or a "
                             "path to a skill YAML")
-    for text in (str(tmp_path / "jump.yaml"), "nowhere/jump"):
+    for text in (str(tmp_path / "jump.yaml"), "jump.yml", "nowhere/jump"):
         with pytest.raises(FileNotFoundError) as e:
             load_skill(text)
         assert str(e.value) == (f"skill file {text}: no such file; give a shipped skill's name ({names}) or an "
@@ -331,6 +331,12 @@ def test_scenario_paths_and_load_errors(tmp_path):
     with pytest.raises(ValueError) as e:
         load_skill(path)
     assert str(e.value).endswith("; see docs/skills.md for the fields") and str(path) in str(e.value)
+    assert str(e.value).startswith(f"skill file ({path}): field ")
+    # The reach check names the skill file itself (no scenario prefix).
+    far = _write(tmp_path, name="far", p1="[0.3, 0.0, 0.3]")
+    with pytest.raises(ValueError) as e:
+        load_skill(far)
+    assert str(e.value).startswith(f"skill file {far} field 'keyframes[0].pose' = ")
     # A scenario whose own check fails (a bad scenario file) is named after the skill file.
     (tmp_path / "bad.yaml").write_text(load_skill("draw").scenario_path().read_text() + "\ntime_step: -1.0\n")
     path = _write(tmp_path, scenario="bad.yaml")
