@@ -206,12 +206,13 @@ def test_read_orders_demos_by_number_and_names_what_is_missing(tmp_path):
 
     path, demos = _export(tmp_path, [make_demo(i, perception=False) for i in range(3)])
     with h5py.File(path, "a") as f:
-        f["data"].move("demo_2", "demo_10")
+        f["data"].move("demo_1", "demo_10")
         f.create_group("data/mask")                           # robomimic's filter keys: not a demo
         f.create_group("data/demo_x")
-    assert [d.seed for d in read_robomimic(str(path))] == [0, 1, 2]          # demo_10 after demo_1
+    assert [d.seed for d in read_robomimic(str(path))] == [0, 2, 1]          # demo_10 after demo_2
     paths, imported = import_robomimic(path, tmp_path / "back")
     assert [p.name for p in paths] == ["demo_000.npz", "demo_001.npz", "demo_002.npz"]
+    assert [d.seed for d in imported] == [0, 2, 1]
     assert imported[0].path == f"{path}:/data/demo_0"
     with pytest.raises(FileNotFoundError) as e:
         read_robomimic(tmp_path / "none.hdf5")
@@ -229,8 +230,8 @@ def test_read_orders_demos_by_number_and_names_what_is_missing(tmp_path):
     assert damaged(lambda f: [f["data"].pop(n) for n in list(f["data"])]) == (
         "F: 'data' has no demo_N groups; nothing to import: export a folder that holds demonstrations "
         "('drake-skill demos list DIR' shows them)")
-    assert damaged(lambda f: f["data/demo_1/drake_skill"].attrs.pop("seed")) == \
-        "F:/data/demo_1/drake_skill: attribute 'seed' is missing"
+    assert damaged(lambda f: f["data/demo_10/drake_skill"].attrs.pop("seed")) == \
+        "F:/data/demo_10/drake_skill: attribute 'seed' is missing"
     assert damaged(lambda f: f["data/demo_0/drake_skill"].attrs.__setitem__("metadata", "{x")).startswith(
         "F:/data/demo_0/drake_skill: attribute 'metadata' is not JSON (")
     assert damaged(lambda f: f["data/demo_0/drake_skill"].pop("q_100hz")) == (
@@ -242,9 +243,12 @@ def test_read_orders_demos_by_number_and_names_what_is_missing(tmp_path):
     assert damaged(lambda f: f["data/demo_0"].pop("obs")) == (
         "F:/data/demo_0: '/data/demo_0/hand_pose' is missing; not a dataset written by "
         "'drake-skill demos export --format robomimic'")
+    assert damaged(lambda f: f["data/demo_0"].pop("drake_skill")) == (
+        "F:/data/demo_0: group 'drake_skill' is missing; only datasets written by 'drake-skill demos export' can be "
+        "imported (they carry the 100 Hz data)")
     # A demonstration the file holds but that is invalid is named by its place in the file.
-    assert damaged(lambda f: f["data/demo_1/drake_skill"].attrs.__setitem__("skill", "")).startswith(
-        "F:/data/demo_1")
+    assert damaged(lambda f: f["data/demo_10/drake_skill"].attrs.__setitem__("skill", "")).startswith(
+        "F:/data/demo_10")
 
 
 def test_read_of_perception_and_damaged_bytes(tmp_path):
@@ -257,8 +261,16 @@ def test_read_of_perception_and_damaged_bytes(tmp_path):
     target.write_bytes(path.read_bytes())
     with h5py.File(target, "a") as f:
         f["data/demo_0/drake_skill"].pop("X_WO_start")
-    with pytest.raises(DemonstrationError, match="drake_skill/X_WO_start' is missing"):
+    with pytest.raises(DemonstrationError) as e:
         read_robomimic(target)
+    assert str(e.value) == (f"{target}:/data/demo_0: '/data/demo_0/drake_skill/X_WO_start' is missing; not a "
+                            "dataset written by 'drake-skill demos export --format robomimic'")
+    target.write_bytes(path.read_bytes())
+    with h5py.File(target, "a") as f:
+        f["data/demo_0/obs"].pop("object_points_valid")
+    with pytest.raises(DemonstrationError) as e:
+        read_robomimic(target)
+    assert str(e.value).startswith(f"{target}:/data/demo_0: '/data/demo_0/obs/object_points_valid' is missing")
     target.write_bytes(path.read_bytes())
     with h5py.File(target, "a") as f:                 # a value h5py reads but that is no number
         f["data/demo_0/drake_skill"].attrs["final_object_state"] = "abc"

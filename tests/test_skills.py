@@ -250,7 +250,7 @@ def test_reach_is_checked_on_every_corner_of_the_placement_range():
             check_with_scenario(spec, config, "W")
         return str(e.value)
 
-    along_x, along_y = at([0.84, 0.0, 0.333]), at([0.0, -0.84, 0.333])       # 0.84 m from the shoulder
+    along_x, along_y = at([0.8404, 0.0, 0.333]), at([0.0, -0.84, 0.333])     # 0.84 m from the shoulder
     check_with_scenario(along_x, _at_origin(along_x, randomize_xy=0.01))     # at most 0.85 m
     for spec in (along_x, along_y):
         assert message(spec, _at_origin(spec, randomize_xy=0.02)).endswith(
@@ -258,6 +258,13 @@ def test_reach_is_checked_on_every_corner_of_the_placement_range():
             "is 0.86 m from the shoulder); move it or the object closer")
     assert message(along_x, _at_origin(along_x, randomize_xy=0.02)).startswith(
         "skill file W field 'keyframes[0].pose' = [0.84, 0.0, 0.333]: ")
+    # Each sign of each loop: -x and +y too, within reach at 0.01 but not at 0.02; the yaw by 0.01 each way.
+    for spec in (at([-0.84, 0.0, 0.333]), at([0.0, 0.84, 0.333])):
+        check_with_scenario(spec, _at_origin(spec, randomize_xy=0.01))
+        assert "(this one is 0.86 m" in message(spec, _at_origin(spec, randomize_xy=0.02))
+    for p in ([0.7, 0.3, 0.333], [0.7, -0.3, 0.333]):
+        check_with_scenario(at(p), _at_origin(at(p), x=0.1, randomize_yaw=0.01))       # 0.8547 m at most
+        assert "(this one is 0.86 m" in message(at(p), _at_origin(at(p), x=0.1, randomize_yaw=0.02))
     # Off the axis, 0.854 m at the nominal pose: turned by -0.1 rad it is 0.857 m away, by +0.1 rad 0.850 m.
     off = at([0.7, 0.3, 0.333])
     check_with_scenario(off, _at_origin(off, x=0.1))
