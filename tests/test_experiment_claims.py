@@ -110,7 +110,7 @@ def _rows():
 EXPECTED_MD = "\n".join([
     '# Experiment results',
     '',
-    "From `t.csv` alone (17 greedy executions of 7 runs). Greedy success is the simulator's ground truth; e0 is before learning, ek after k episodes (PoWER: after k x C rollouts). AUC: area under a run's greedy success against episode over E; mean ± sd over runs. Held-out after: success over the held-out poses after learning, mean ± sd over runs.",
+    "From `t.csv` alone (17 greedy executions of 7 runs). Greedy success is the simulator's ground truth; e0 is before learning, ek after k episodes (PoWER: after k x C rollouts). AUC: area under a run's greedy success against episode over E; mean ± sd over runs. Held-out after: success over the held-out poses after learning, mean ± sd over runs.",  # noqa: E501
     '',
     '## close',
     '',
@@ -140,7 +140,7 @@ EXPECTED_MD = "\n".join([
     '',
     "## The thesis's claims (section 7.1)",
     '',
-    'Better/worse: the 95 % Welch interval of the difference of means lies above/below 0; a lower spread: the smaller sd with Brown-Forsythe p < 0.05. A claim holds when every comparison is better, does not hold when one is worse, and cannot tell otherwise. Reported, not tested.',
+    'Better/worse: the 95 % Welch interval of the difference of means lies above/below 0; a lower spread: the smaller sd with Brown-Forsythe p < 0.05. A claim holds when every comparison is better, does not hold when one is worse, and cannot tell otherwise. Reported, not tested.',  # noqa: E501
     '',
     '1. Learned dense rewards beat sparse ones for every method but PoWER. **cannot tell**',
     '',
@@ -221,7 +221,8 @@ def test_claims_skip_what_they_cannot_compare():
         "close, dense: AUC pi2-es vs pi2 1.00 ± 0.00 vs 0.00 ± 0.00, difference +1.00 [+1.00, +1.00]: better"]
     # The leader against the best other by mean for speed and height, by the lowest sd for spread.
     cells = [_cell("pi2-es-cov", "dense", [ALWAYS] * 4, [1.0] * 4), _cell("pi2", "dense", [MID] * 4, [0.2] * 4),
-             _cell("cma-es", "dense", [EARLY, EARLY, EARLY, LATE], [0.6, 0.4] * 2), _cell("power", "sparse", [ALWAYS] * 4)]
+             _cell("cma-es", "dense", [EARLY, EARLY, EARLY, LATE], [0.6, 0.4] * 2),
+             _cell("power", "sparse", [ALWAYS] * 4)]
     verdict, lines = claim_leader(cells)
     assert [line.split(": ")[1].split(",")[1] for line in lines] == [" cma-es", " cma-es", " pi2"]
     assert lines[2].startswith("close, lowest variance (sd of AUC): pi2-es-cov vs the best other, pi2: sd 0.00 vs "
@@ -248,7 +249,8 @@ def test_write_report_files_and_errors(tmp_path, monkeypatch):
 
     titles = []
     real_save = report._save
-    monkeypatch.setattr(report, "_save", lambda fig, path: titles.append(fig.axes[0].get_title()) or real_save(fig, path))
+    monkeypatch.setattr(report, "_save",
+                        lambda fig, path: titles.append(fig.axes[0].get_title()) or real_save(fig, path))
     written = write_report(grid)
     assert titles == ["pi2", "close: every method, dense reward", "power", "open: every method, dense reward"]
     assert [p.name for p in written] == ["close_methods.png", "close_dense.png", "open_methods.png",
@@ -300,8 +302,8 @@ def test_figures_draw_the_bands_of_every_cell(monkeypatch):
     # The band: mean -/+ the sd over runs (ddof 1), clipped to [0, 1].
     sd = np.std([[1, 1], [0, 1]], axis=0, ddof=1)
     vertices = band.get_paths()[0].vertices
-    np.testing.assert_allclose(sorted(set(vertices[:, 1].round(12))),
-                               sorted(set(np.r_[np.clip([0.5, 1.0] - sd, 0, 1), np.clip([0.5, 1.0] + sd, 0, 1)].round(12))))
+    edges = np.r_[np.clip([0.5, 1.0] - sd, 0, 1), np.clip([0.5, 1.0] + sd, 0, 1)]
+    np.testing.assert_allclose(sorted(set(vertices[:, 1].round(12))), sorted(set(edges.round(12))))
     # Four methods: 2 x 3 panels, the last two off.
     four = [report.Cell("s", m, "dense", [0], np.array([[0, 1]]), [None], None) for m in ("a", "b", "c", "d")]
     report.plot_methods(four, "s", "x.png")

@@ -358,7 +358,8 @@ def test_progress_rows_and_their_csv_lines_by_hand(tmp_path):
     log.row({"episode": 3, "greedy_success": 1, "greedy_verdict": 0, "greedy_return": 12.5, "mean_return": 7.25,
              "best_return": 9.0, "exploration": 0.5, "rollout_successes": 2, "failures": {"solver": 1, "reflex": 2},
              "ik_warnings": 4})
-    assert (tmp_path / "progress.csv").read_text().splitlines()[1] == "3,15,1,0,12.5,7.25,9.0,0.5,2,3,reflex:2 solver:1,4"
+    assert (tmp_path / "progress.csv").read_text().splitlines()[1] == \
+        "3,15,1,0,12.5,7.25,9.0,0.5,2,3,reflex:2 solver:1,4"
     back, = read_progress(tmp_path / "progress.csv")
     assert back == row and [type(back[k]) for k in ("episode", "greedy_return", "failures")] == [int, float, int]
 

@@ -300,7 +300,8 @@ def test_control_plant_ee_frame_and_the_arm_and_hand_welds():
     aux.Finalize()
     assert aux.num_positions() == 9                     # the arm's 7 and the two fingers: the rest welded
     ctx = aux.CreateDefaultContext()
-    X_8H = aux.CalcRelativeTransform(ctx, aux.GetFrameByName("panda_link8", arm), aux.GetFrameByName("panda_hand", hand))
+    X_8H = aux.CalcRelativeTransform(ctx, aux.GetFrameByName("panda_link8", arm),
+                                     aux.GetFrameByName("panda_hand", hand))
     np.testing.assert_allclose(X_8H.GetAsMatrix4(), X_FLANGE_HAND.GetAsMatrix4(), atol=1e-15)
     X_W0 = aux.CalcRelativeTransform(ctx, aux.world_frame(), aux.GetFrameByName("panda_link0", arm))
     np.testing.assert_allclose(X_W0.GetAsMatrix4(), np.eye(4), atol=0)
