@@ -218,7 +218,7 @@ def test_a_ray_task_needs_nothing_under_out_and_only_the_driver_writes_there(gri
     (here moved away while it runs), and the driver's store gives the process pool's file."""
     import pickle
 
-    from drake_skill.experiments.grid import _runner_specs
+    from drake_skill.experiments.grid import _runner_specs, execute_task
     from drake_skill.experiments.remote import execute_remote, remote_tasks, store_result
 
     shared, out, _ = grid
@@ -226,7 +226,7 @@ def test_a_ray_task_needs_nothing_under_out_and_only_the_driver_writes_there(gri
     new = tmp_path / "out"
     specs = _runner_specs(new, config, shared["skill_dir"], shared["station_yaml"], rollout_config(), True)
     (task,) = [t for t in plan_tasks(new, config, specs) if t.kind == "before"]
-    remote, skills = remote_tasks([task])
+    remote, skills = remote_tasks([task], execute_task)
     assert str(new).encode() not in pickle.dumps(remote[0]).replace(str(new / "close" / "initial_skill").encode(), b"")
     assert remote[0].task.path == ""     # (the skill folder goes only as the label for config.json)
     new.rename(tmp_path / "away")                  # the worker's node has no --out at all

@@ -461,7 +461,7 @@ def _execute_on_ray(tasks, workers: int, ray_address, on_done) -> None:
     from drake_skill.experiments.pool import run_on_ray
     from drake_skill.experiments.remote import execute_remote, remote_tasks, store_result
 
-    remote, skills = remote_tasks(tasks)
+    remote, skills = remote_tasks(tasks, execute_task)
     origin = {id(r): t for r, t in zip(remote, tasks)}
 
     def stored(r, payload, error):
@@ -469,7 +469,7 @@ def _execute_on_ray(tasks, workers: int, ray_address, on_done) -> None:
         if payload is None:
             return on_done(task, None, error)
         try:
-            summary = store_result(task, payload)
+            summary = store_result(task, payload, partial_dir(Path(task.path)) if task.kind == "run" else None)
         except OSError as e:
             return on_done(task, None, f"storing the result under --out failed: {e}")
         on_done(task, summary, None)

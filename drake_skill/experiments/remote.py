@@ -11,9 +11,9 @@ A Ray worker may run on a node that cannot see the driver's ``--out``
   the bytes' digest) and builds its runner from there;
 - a task (:class:`RemoteTask`) holds no path under ``--out``: the grid
   task with its path emptied and the digest of its skill;
-- the worker runs the task into a temporary folder
-  (:func:`~drake_skill.experiments.grid.execute_task`, the same code the
-  process pool runs), writes the driver's skill folder into the run's
+- the worker runs the task into a temporary folder (the task's
+  ``execute``, :func:`~drake_skill.experiments.grid.execute_task`: the same
+  code the process pool runs), writes the driver's skill folder into the run's
   ``config.json`` where the worker's copy was, and returns the folder's
   files with the summary (:func:`execute_remote`);
 - the driver stores them (:func:`store_result`): a run's files into its
@@ -34,7 +34,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from drake_skill.fileio import atomic_write_bytes, pack_folder, unpack_folder
 
@@ -55,14 +55,16 @@ def _digest(files: dict[str, bytes]) -> str:
 class RemoteTask:
     """A grid task as sent to a Ray worker: ``task`` with its ``path`` emptied and its spec's skill
     folder kept only as the label written into the run's ``config.json``; ``skill``: the digest of
-    the skill's files in the shared :data:`SkillFiles`."""
+    the skill's files in the shared :data:`SkillFiles`; ``execute``: what runs it
+    (``grid.execute_task``, a module-level function: it travels by name)."""
 
     task: Any
     skill: str
+    execute: Callable[[Any], dict]
 
 
-def remote_tasks(tasks) -> tuple[list[RemoteTask], SkillFiles]:
-    """The tasks as :class:`RemoteTask` (same order) and the skills' files they name."""
+def remote_tasks(tasks, execute: Callable[[Any], dict]) -> tuple[list[RemoteTask], SkillFiles]:
+    """The tasks as :class:`RemoteTask` run by ``execute`` (same order) and the skills' files they name."""
     files: SkillFiles = {}
     keys: dict[str, str] = {}
     remote = []
@@ -72,7 +74,7 @@ def remote_tasks(tasks) -> tuple[list[RemoteTask], SkillFiles]:
             packed = pack_folder(folder)
             keys[folder] = _digest(packed)
             files[keys[folder]] = packed
-        remote.append(RemoteTask(dc.replace(task, path=""), keys[folder]))
+        remote.append(RemoteTask(dc.replace(task, path=""), keys[folder], execute))
     return remote, files
 
 
@@ -90,14 +92,12 @@ def _skill_copy(key: str, skills: SkillFiles) -> Path:
 def execute_remote(remote: RemoteTask, skills: SkillFiles) -> dict[str, Any]:
     """Runs ``remote`` in a temporary folder of this worker; returns ``{"summary", "files"}`` (the
     run folder's files, or for a held-out-before task ``{"": the record's JSON bytes}``)."""
-    from drake_skill.experiments.grid import execute_task
-
     task = remote.task
     label = task.spec.skill_dir
     spec = dc.replace(task.spec, skill_dir=str(_skill_copy(remote.skill, skills)))
     with tempfile.TemporaryDirectory(prefix="drake_skill_task_") as tmp:
         target = Path(tmp) / ("run" if task.kind == "run" else "held_out_before.json")
-        summary = execute_task(dc.replace(task, spec=spec, path=str(target)))
+        summary = remote.execute(dc.replace(task, spec=spec, path=str(target)))
         if task.kind != "run":
             return {"summary": summary, "files": {"": target.read_bytes()}}
         _relabel(target / "config.json", label)
@@ -111,16 +111,14 @@ def _relabel(config_json: Path, skill_dir: str) -> None:
     config_json.write_text(json.dumps(config, indent=2, sort_keys=True) + "\n")
 
 
-def store_result(task, payload: dict[str, Any]) -> dict[str, Any]:
-    """Stores a remote task's files under the driver's ``--out`` (module docstring); returns its summary."""
-    from drake_skill.experiments.grid import partial_dir
-
+def store_result(task, payload: dict[str, Any], partial: Path | None = None) -> dict[str, Any]:
+    """Stores a remote task's files under the driver's ``--out`` (module docstring): a run's through
+    ``partial`` (its ``.run_RRR.partial`` folder); returns its summary."""
     files = payload["files"]
     if task.kind != "run":
         atomic_write_bytes(task.path, files[""])
         return payload["summary"]
     final = Path(task.path)
-    partial = partial_dir(final)
     shutil.rmtree(partial, ignore_errors=True)
     unpack_folder(files, partial)
     final.parent.mkdir(parents=True, exist_ok=True)
