@@ -175,7 +175,6 @@ def _run(args) -> int:
 
 def _record_demo(args) -> int:
     import numpy as np
-    from pydrake.math import RigidTransform
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
 
@@ -236,9 +235,8 @@ def _record_demo(args) -> int:
                          "the demonstration format needs it (see drake-skill hardware --help)")
     X_WO = X_WO_placed
     if recorder.X_WO_perceived is not None:
-        from pydrake.common.eigen_geometry import Quaternion
-        v = np.asarray(recorder.X_WO_perceived, dtype=float)
-        X_WO = RigidTransform(Quaternion(v[3:] / np.linalg.norm(v[3:])), v[:3])
+        from drake_skill.station.recording import vector_to_pose
+        X_WO = vector_to_pose(recorder.X_WO_perceived)
     from drake_skill.station.success import judge_success
     success = judge_success(float(obj[-1]), config.station.success)
     metadata = {"source": "kinesthetic", "lcm_url": config.lcm_url,

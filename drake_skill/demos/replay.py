@@ -44,12 +44,11 @@ def joints_replay_html(config, X_WO_true, times, q, gripper, object_state, meshc
     positions [rad]; gripper (N,) or a number: the finger opening [m]; object_state (N,)
     the object joint [rad or m]. meshcat: as :func:`replay_html`'s.
     """
-    from pydrake.common.eigen_geometry import Quaternion
     from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
-    from pydrake.math import RigidTransform
     from pydrake.systems.framework import DiagramBuilder
 
     from drake_skill.common import frame_meshcat_camera
+    from drake_skill.station.recording import vector_to_pose
     from drake_skill.station.sim.builder import add_scene_plant
 
     times = np.asarray(times, dtype=float)
@@ -62,8 +61,7 @@ def joints_replay_html(config, X_WO_true, times, q, gripper, object_state, meshc
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     plant, plant_context = scene.plant, scene.plant.GetMyMutableContextFromRoot(context)
-    v = np.asarray(X_WO_true, dtype=float)
-    X_WO = RigidTransform(Quaternion(v[3:] / np.linalg.norm(v[3:])), v[:3])
+    X_WO = vector_to_pose(X_WO_true)
     plant.SetFreeBodyPose(plant_context, scene.object_base, X_WO)
     joint_index = scene.object_joint.position_start()     # the lid's hinge or the drawer's slide
     frame_meshcat_camera(meshcat, X_WO.translation())

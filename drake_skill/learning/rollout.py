@@ -49,7 +49,6 @@ from typing import Any
 
 import numpy as np
 from pydrake.common.value import AbstractValue, Value
-from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, LeafSystem
@@ -62,7 +61,7 @@ from drake_skill.station.sim.builder import Station, build_station
 from drake_skill.station.config import StationConfig
 from drake_skill.station.frames import add_camera_frames, downscale, frames_port_and_stride
 from drake_skill.station.records import StationLoggers
-from drake_skill.station.recording import advance_station, check_joint_state, pose_to_vector
+from drake_skill.station.recording import advance_station, check_joint_state, pose_to_vector, vector_to_pose
 from drake_skill.station.success import judge_run
 
 __all__ = ["FAILURE_REASONS", "ActionModel", "ObjectPoseSource", "RolloutConfig", "RolloutResult",
@@ -166,11 +165,6 @@ class ActionModel:
     gripper_opening: float = 0.0
 
 
-def _X_from_vector(v) -> RigidTransform:
-    v = np.asarray(v, dtype=float)
-    return RigidTransform(Quaternion(v[3:] / np.linalg.norm(v[3:])), v[:3])
-
-
 @dc.dataclass
 class RolloutResult:
     """One execution. Plain numbers and arrays (it crosses process boundaries).
@@ -229,12 +223,12 @@ class RolloutResult:
     @property
     def X_WO(self) -> RigidTransform:
         """The object pose the DMP's frame was mapped with."""
-        return _X_from_vector(self.object_pose)
+        return vector_to_pose(self.object_pose)
 
     @property
     def X_WO_true(self) -> RigidTransform:
         """The simulator's object pose."""
-        return _X_from_vector(self.object_pose_true)
+        return vector_to_pose(self.object_pose_true)
 
     def summary(self) -> dict[str, Any]:
         """JSON-able scalars of the result (no trajectories)."""

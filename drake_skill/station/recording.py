@@ -36,6 +36,14 @@ def pose_to_vector(X: RigidTransform) -> np.ndarray:
     return np.r_[X.translation(), X.rotation().ToQuaternion().wxyz()]
 
 
+def vector_to_pose(v) -> RigidTransform:
+    """The RigidTransform of [x, y, z, qw, qx, qy, qz] (the quaternion normalised): ``pose_to_vector``'s inverse."""
+    from pydrake.common.eigen_geometry import Quaternion
+
+    v = np.asarray(v, dtype=float)
+    return RigidTransform(Quaternion(v[3:] / np.linalg.norm(v[3:])), v[:3])
+
+
 class DivergedError(RuntimeError):
     """The simulation produced non-finite or runaway states."""
 

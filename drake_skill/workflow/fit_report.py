@@ -82,13 +82,13 @@ class _Poser:
     def __init__(self, station, demo):
         from drake_skill.perception.systems import segmenter_config_for_station
         from drake_skill.skills.camera_check import object_labels
+        from drake_skill.station.recording import vector_to_pose
 
         self.station, self.demo = station, demo
         self.seg = segmenter_config_for_station(station.config, station.object_camera.window).segmentation
         self.labels = object_labels(station)
         self.context = station.CreateDefaultContext()
-        v = np.asarray(demo.X_WO_true, dtype=float)
-        station.set_object_pose(self.context, _transform(v))
+        station.set_object_pose(self.context, vector_to_pose(demo.X_WO_true))
         self.plane = None
 
     def pose(self, t: float) -> None:
@@ -115,13 +115,6 @@ class _Poser:
         coloured = target_colour_mask(rgb, self.seg).reshape(shape) & truth
         kept = segment_object(cloud.xyzs().T, rgb, self.plane, self.seg, shape).mask() & truth
         return rgb.reshape(*shape, 3), truth, coloured, kept
-
-
-def _transform(v):
-    from pydrake.common.eigen_geometry import Quaternion
-    from pydrake.math import RigidTransform
-
-    return RigidTransform(Quaternion(v[3:] / np.linalg.norm(v[3:])), v[:3])
 
 
 def _snapshot_times(demo) -> list[tuple[str, float]]:
