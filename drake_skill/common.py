@@ -87,3 +87,17 @@ def frame_meshcat_camera(meshcat, object_xyz) -> None:
     from the front left, above, at the point halfway between them, 0.25 m up."""
     target = 0.5 * np.asarray(object_xyz, dtype=float) + np.array([0.0, 0.0, 0.25])   # between base and object
     meshcat.SetCameraPose(target + np.array([0.9, -1.3, 0.55]), target)
+
+
+def recorded_html(meshcat, action, *, fps: float = 32.0, live: bool = False):
+    """Runs ``action()`` while ``meshcat`` records (``live``: also drawn as it runs); returns
+    ``(action's result, the recording as one standalone HTML page)`` and deletes the recording."""
+    meshcat.StartRecording(frames_per_second=fps, set_visualizations_while_recording=live)
+    try:
+        result = action()
+    finally:
+        meshcat.StopRecording()
+    meshcat.PublishRecording()
+    html = meshcat.StaticHtml()
+    meshcat.DeleteRecording()
+    return result, html

@@ -47,7 +47,7 @@ def joints_replay_html(config, X_WO_true, times, q, gripper, object_state, meshc
     from pydrake.geometry import Meshcat, MeshcatVisualizer, MeshcatVisualizerParams, Role
     from pydrake.systems.framework import DiagramBuilder
 
-    from drake_skill.common import frame_meshcat_camera
+    from drake_skill.common import frame_meshcat_camera, recorded_html
     from drake_skill.station.recording import vector_to_pose
     from drake_skill.station.sim.builder import add_scene_plant
 
@@ -67,8 +67,7 @@ def joints_replay_html(config, X_WO_true, times, q, gripper, object_state, meshc
     frame_meshcat_camera(meshcat, X_WO.translation())
     step = max(1, int(round(1.0 / (FPS * float(np.median(np.diff(times))))))) if times.size > 1 else 1
     samples = np.unique(np.append(np.arange(0, times.size, step), times.size - 1))
-    meshcat.StartRecording(frames_per_second=FPS, set_visualizations_while_recording=False)
-    try:
+    def draw():
         for k in samples:
             context.SetTime(float(times[k]))
             plant.SetPositions(plant_context, scene.panda, q[k])
@@ -77,12 +76,8 @@ def joints_replay_html(config, X_WO_true, times, q, gripper, object_state, meshc
             positions[joint_index] = object_state[k]
             plant.SetPositions(plant_context, positions)
             diagram.ForcedPublish(context)
-    finally:
-        meshcat.StopRecording()
-    meshcat.PublishRecording()
-    html = meshcat.StaticHtml()
-    meshcat.DeleteRecording()
-    return html
+
+    return recorded_html(meshcat, draw, fps=FPS)[1]
 
 
 def write_replay(demo: Demonstration, path, station_config=None, meshcat=None) -> Path:

@@ -75,7 +75,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from drake_skill.common import frame_meshcat_camera
+from drake_skill.common import frame_meshcat_camera, recorded_html
 from drake_skill.fileio import atomic_write_json, atomic_write_text, load_json
 from drake_skill.learning import selection
 from drake_skill.learning.config import REWARDS, LearnConfig
@@ -155,14 +155,8 @@ class _Replay:
         if path is None:
             return runner.run(weights, seed)
         frame_meshcat_camera(self.meshcat, runner.station.random_object_pose(seed).translation())
-        self.meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=self.live)
-        try:
-            result = runner.run(weights, seed)
-        finally:
-            self.meshcat.StopRecording()
-        self.meshcat.PublishRecording()
-        atomic_write_text(path, self.meshcat.StaticHtml())
-        self.meshcat.DeleteRecording()
+        result, html = recorded_html(self.meshcat, lambda: runner.run(weights, seed), live=self.live)
+        atomic_write_text(path, html)
         return result
 
 
