@@ -127,8 +127,7 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
         finally:
             bar.close()
         if keep is not None:
-            _keep_rollouts(keep, f"evaluation_dmp_{index}", results, skill_dir, station_config, rollout_config,
-                           index)
+            _keep_rollouts(keep, f"evaluation_dmp_{index}", results, spec)
         policy["initial"] = index == skill.initial_index
         report["policies"][str(index)] = policy
     report["success_rate"] = report["policies"][str(skill.initial_index)]["success_rate"] \
@@ -137,17 +136,13 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
     return report
 
 
-def _keep_rollouts(folder, name, results, skill_dir, station_config, rollout_config, dmp_index) -> None:
-    """``folder/rollouts/NAME.npz`` with what a replay builds its runner from."""
-    import dataclasses as dc
-
-    from pydrake.common.yaml import yaml_dump_typed
-
+def _keep_rollouts(folder, name, results, spec) -> None:
+    """``folder/rollouts/NAME.npz`` with what a replay builds its runner from: ``spec``'s fields (the
+    ``RunnerSpec`` the rollouts ran on), under the keys of a learn run's ``config.json``."""
     from drake_skill.learning.rollout_store import rollouts_path, save_rollouts
 
-    save_rollouts(rollouts_path(folder, name), results,
-                  {"skill_dir": str(Path(skill_dir).resolve()), "station": yaml_dump_typed(station_config),
-                   "rollout": dc.asdict(rollout_config), "dmp_index": dmp_index})
+    save_rollouts(rollouts_path(folder, name), results, {"skill_dir": spec.skill_dir, "station": spec.station_yaml,
+                                                         "rollout": spec.rollout, "dmp_index": spec.dmp_index})
 
 
 def best_return_index(mean_returns, default: int) -> int:
@@ -276,7 +271,7 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     finally:
         bar.close()
     if keep is not None:
-        _keep_rollouts(keep, "exploration", results, skill_dir, station_config, rollout_config, None)
+        _keep_rollouts(keep, "exploration", results, spec)
     report = {"skill": skill.name, "skill_dir": str(Path(skill_dir)), "object_pose": rollout_config.object_pose,
               "exploration_scale": float(exploration_scale), **results_report(seeds, results)}
     returns = np.array(report["returns"])

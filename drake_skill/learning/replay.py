@@ -78,26 +78,15 @@ def replay_rollout(folder, name: str, index: int, out=None, *, stored: bool = Fa
     out = Path(out) if out is not None else folder / "replays" / f"{name}_c{int(index)}.html"
     out.parent.mkdir(parents=True, exist_ok=True)
     meshcat = meshcat if meshcat is not None else Meshcat()
-    station_config, skill = _station_config(setup), _skill(setup)
     if stored:
-        return _draw_stored(record, station_config, skill, out, meshcat)
-    return _resimulate(record, setup, station_config, skill, out, meshcat)
+        return _draw_stored(record, setup, out, meshcat)
+    return _resimulate(record, setup, out, meshcat)
 
 
-def _station_config(setup: dict):
-    from drake_skill.station.config import load_station_config
-
-    return load_station_config(data=setup["station"])
-
-
-def _skill(setup: dict):
-    from drake_skill.skill import Skill
-
-    return Skill.load(setup["skill_dir"])
-
-
-def _draw_stored(record, station_config, skill, out: Path, meshcat) -> Replayed:
+def _draw_stored(record, setup: dict, out: Path, meshcat) -> Replayed:
     from drake_skill.demos.replay import joints_replay_html
+    from drake_skill.skill import Skill
+    from drake_skill.station.config import load_station_config
 
     if "joints" not in record:
         raise ValueError("this rollout stored no joints (it failed before it was simulated); nothing to draw")
@@ -105,31 +94,29 @@ def _draw_stored(record, station_config, skill, out: Path, meshcat) -> Replayed:
     X_WO = record["object_pose_true"] if np.all(np.isfinite(record["object_pose_true"])) else record["object_pose"]
     if not np.all(np.isfinite(X_WO)):
         raise ValueError("this rollout stored no object pose (it failed before perceiving one); nothing to place")
-    html = joints_replay_html(station_config, X_WO, record["times"], record["joints"],
-                              float(skill.gripper_opening), record["object_state"], meshcat)
+    html = joints_replay_html(load_station_config(data=setup["station"]), X_WO, record["times"], record["joints"],
+                              float(Skill.load(setup["skill_dir"]).gripper_opening), record["object_state"], meshcat)
     return Replayed(atomic_write_text(out, html), record)
 
 
-def _resimulate(record, setup, station_config, skill, out: Path, meshcat) -> Replayed:
-    from drake_skill.common import frame_meshcat_camera
-    from drake_skill.learning.rollout import RolloutConfig, RolloutRunner
+def _resimulate(record, setup: dict, out: Path, meshcat) -> Replayed:
+    """The runner the run used (``RunnerSpec``, as its workers built theirs), with Meshcat."""
+    from drake_skill.common import frame_meshcat_camera, recorded_html
+    from drake_skill.learning.workers import RunnerSpec
 
-    dmp_index = record["meta"].get("dmp_index")
-    dmp = skill.dmps[int(dmp_index)] if dmp_index is not None else None
-    rollout_config = RolloutConfig(**setup["rollout"])
-    runner = RolloutRunner(skill, station_config, rollout_config, meshcat=meshcat, dmp=dmp)
+    spec = RunnerSpec(setup["skill_dir"], setup["station"], setup["rollout"], quiet_ik=False,
+                      dmp_index=record["meta"].get("dmp_index"))
+    runner = spec.build(meshcat)
     frame_meshcat_camera(meshcat, runner.station.random_object_pose(record["seed"]).translation())
-    meshcat.StartRecording(frames_per_second=32.0, set_visualizations_while_recording=False)
-    try:
+    def run():
         result = runner.run(record["weights"], record["seed"])
         # The state at the end or the stop drawn once more: a reflex trips within milliseconds of the
         # first touch, often between two of the visualizers' 32 Hz publishes.
         runner.diagram.ForcedPublish(runner.context)
-    finally:
-        meshcat.StopRecording()
-    meshcat.PublishRecording()
-    atomic_write_text(out, meshcat.StaticHtml())
-    meshcat.DeleteRecording()
+        return result
+
+    result, html = recorded_html(meshcat, run)
+    atomic_write_text(out, html)
     error = None
     if "ee_pose" in record and len(record["ee_pose"]) == len(result.ee_pose):
         error = float(np.max(np.linalg.norm(result.ee_pose[:, :3] - record["ee_pose"][:, :3], axis=1), initial=0.0))
