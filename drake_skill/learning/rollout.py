@@ -59,7 +59,7 @@ from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
 from drake_skill.station.sim.builder import Station, build_station
 from drake_skill.station.config import StationConfig
-from drake_skill.station.frames import add_camera_frames, downscale, frames_port_and_stride
+from drake_skill.station.frames import add_camera_frames
 from drake_skill.station.records import StationLoggers
 from drake_skill.station.recording import advance_station, check_joint_state, pose_to_vector, vector_to_pose
 from drake_skill.station.success import judge_run
@@ -455,9 +455,13 @@ class RolloutRunner:
         result.weights = weights.copy()
         return result
 
+    def _samples(self) -> int:
+        """n: the run's samples are on the grid k / record_hz, k = 0..n, n / record_hz >= duration."""
+        return int(np.ceil(self.duration() * self.rollout_config.record_hz - 1e-9))
+
     def _records(self):
         """The loggers' samples on the ``record_hz`` grid up to where the run got."""
-        return self.loggers.read(self.context, int(np.ceil(self.duration() * self.rollout_config.record_hz - 1e-9)))
+        return self.loggers.read(self.context, self._samples())
 
     def _keep_until_stop(self, result: RolloutResult) -> None:
         """A failed rollout's path, joints, object state and frames up to the stop (none where it
@@ -473,9 +477,9 @@ class RolloutRunner:
     def _keep_frames(self, result: RolloutResult) -> None:
         if self.frames is None:
             return
-        result.frame_times, result.frames = self.frames.frames(self._sub(self.frames))
-        port, stride = frames_port_and_stride(self.station)
-        result.last_frame = downscale(port.Eval(self.station.GetMyContextFromRoot(self.context)), stride)
+        frames_context = self._sub(self.frames)
+        result.frame_times, result.frames = self.frames.frames(frames_context)
+        result.last_frame = self.frames.now(frames_context)
 
     def _contact(self, error) -> dict:
         """A reflex trip's ``{"pairs", "point", "t", "cause"}`` (the contacts at the stop; pairs and
@@ -495,10 +499,8 @@ class RolloutRunner:
         result.object_pose = pose_to_vector(X_WO)
         result.object_pose_true = pose_to_vector(self.station.object_pose(self.context))
         self._check_trajectory()
-        hz = self.rollout_config.record_hz
-        n = int(np.ceil(self.duration() * hz - 1e-9))
         # One advance over the whole rollout; the loggers in the diagram record it.
-        advance_station(self.simulator, self.station, self.context, n / hz)
+        advance_station(self.simulator, self.station, self.context, self._samples() / self.rollout_config.record_hz)
         records = self._records()
         for t, state in zip(records.times, records.state):
             check_joint_state(state, t)

@@ -10,8 +10,8 @@ this system. It ticks with the camera (period 1 / fps, offset 0, the
 segmenter's event times exactly, so the image is the one already rendered
 and cached for the segmenter) and keeps every fps-th tick: t = 0, 1, 2 ... s.
 
-:func:`downscale` is the same reduction for the last frame of a run, which
-the runner reads from that output at the stop.
+:meth:`CameraFrames.now` gives the same reduction of the image at the
+current state: the last frame of a run, at its end or its stop.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import EventStatus, LeafSystem
 from pydrake.systems.sensors import ImageRgba8U
 
-__all__ = ["CameraFrames", "add_camera_frames", "downscale", "frames_port_and_stride"]
+__all__ = ["CameraFrames", "add_camera_frames", "downscale"]
 
 
 def downscale(image, stride: int) -> np.ndarray:
@@ -62,8 +62,12 @@ class CameraFrames(LeafSystem):
             return np.zeros(0), np.zeros((0, 0, 0, 3), dtype=np.uint8)
         return np.array([t for t, _ in kept]), np.stack([f for _, f in kept])
 
+    def now(self, context) -> np.ndarray:
+        """The image at ``context``'s state, downscaled as the kept ones (a run's last frame)."""
+        return downscale(self._image.Eval(context), self._stride)
 
-def frames_port_and_stride(station) -> tuple[object, int]:
+
+def _port_and_stride(station) -> tuple[object, int]:
     """The station's output the perception reads (module docstring) and the stride that brings its
     width to about 64 pixels."""
     camera = getattr(station, "object_camera", None)
@@ -76,7 +80,7 @@ def add_camera_frames(builder, station, seconds: float = 1.0) -> CameraFrames:
     """A :class:`CameraFrames` named ``camera_frames`` keeping a frame every ``seconds`` of the image
     the perception reads (``station.config.camera.fps``)."""
     fps = float(station.config.camera.fps)
-    port, stride = frames_port_and_stride(station)
+    port, stride = _port_and_stride(station)
     frames = builder.AddNamedSystem("camera_frames", CameraFrames(1.0 / fps, max(1, round(seconds * fps)), stride))
     builder.Connect(port, frames.get_input_port())
     return frames
