@@ -79,15 +79,15 @@ def read_csv_rows(path: str | os.PathLike, columns, what: str, fix: str) -> list
         raise ValueError(f"{path}: damaged CSV ({e}); {fix}") from None
 
 
-def atomic_save_npz(path: str | os.PathLike, arrays: Mapping[str, np.ndarray]) -> Path:
-    """Saves arrays to an ``.npz`` atomically. Object arrays are refused."""
+def atomic_save_npz(path: str | os.PathLike, arrays: Mapping[str, np.ndarray], compressed: bool = False) -> Path:
+    """Saves arrays to an ``.npz`` (``compressed``: deflated) atomically. Object arrays are refused."""
     import io
 
     for name, value in arrays.items():
         if np.asarray(value).dtype == object:
             raise ValueError(f"array '{name}' has dtype object; only numeric arrays are saved (no pickle)")
     buf = io.BytesIO()
-    np.savez(buf, **{k: np.asarray(v) for k, v in arrays.items()})
+    (np.savez_compressed if compressed else np.savez)(buf, **{k: np.asarray(v) for k, v in arrays.items()})
     return atomic_write_bytes(path, buf.getvalue())
 
 

@@ -29,14 +29,14 @@ from __future__ import annotations
 
 import dataclasses as dc
 import hashlib
-import json
 import os
 import shutil
 import tempfile
 from pathlib import Path
 from typing import Any, Callable
 
-from drake_skill.fileio import atomic_write_bytes, pack_folder, unpack_folder
+from drake_skill.fileio import atomic_write_bytes, atomic_write_json, load_json, pack_folder, unpack_folder
+from drake_skill.learning.runstate import DAMAGED_RUN
 
 __all__ = ["RemoteTask", "execute_remote", "remote_tasks", "store_result"]
 
@@ -106,9 +106,7 @@ def execute_remote(remote: RemoteTask, skills: SkillFiles) -> dict[str, Any]:
 
 def _relabel(config_json: Path, skill_dir: str) -> None:
     """The run's ``config.json`` names the driver's skill folder, as a run on the driver's disk does."""
-    config = json.loads(config_json.read_text())
-    config["skill_dir"] = skill_dir
-    config_json.write_text(json.dumps(config, indent=2, sort_keys=True) + "\n")
+    atomic_write_json(config_json, {**load_json(config_json, DAMAGED_RUN), "skill_dir": skill_dir})
 
 
 def store_result(task, payload: dict[str, Any], partial: Path | None = None) -> dict[str, Any]:

@@ -35,14 +35,13 @@ keeps about 1 MB (make demo's Open run, 14 of 30 rollouts stopped by the reflex:
 
 from __future__ import annotations
 
-import io
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from drake_skill.fileio import atomic_write_bytes
+from drake_skill.fileio import atomic_save_npz
 
 __all__ = ["load_rollout", "rollouts_path", "save_rollouts", "stored_names"]
 
@@ -83,9 +82,7 @@ def save_rollouts(path, results, setup: dict[str, Any] | None = None) -> Path:
     arrays: dict[str, np.ndarray] = {"meta": np.asarray(json.dumps({**(setup or {}), "n": len(results)}))}
     for c, result in enumerate(results):
         arrays.update(_arrays(c, result))
-    buf = io.BytesIO()
-    np.savez_compressed(buf, **arrays)
-    return atomic_write_bytes(path, buf.getvalue())
+    return atomic_save_npz(path, arrays, compressed=True)
 
 
 def load_rollout(path, index: int) -> dict[str, Any]:
