@@ -35,18 +35,19 @@ from drake_skill import configs
 from drake_skill.common import look_at
 from drake_skill.configs import load_typed
 from drake_skill.perception.segmentation import CLUSTER_RULES, VALUE_MIN
-from drake_skill.station import limits
+from drake_skill.station import limits, models
+from drake_skill.station.models import model_url
 
 #: The model instances every station's directives must add (the object's is named in ``object.model``).
 ROBOT_MODELS = ("panda", "panda_hand", "table")
 #: The robot and the table as Drake model directives (``ProcessModelDirectives``):
 #: the Panda with its hand (``ROBOT_FILE``, the one definition of the robot), the
 #: table top welded at the world origin. A scenario's ``directives`` add the object.
-ROBOT_FILE = "package://drake_skill_models/panda_robot.dmd.yaml"
-ROBOT_DIRECTIVES = """
-- add_directives: {file: "package://drake_skill_models/panda_robot.dmd.yaml"}
-- add_model: {name: table, file: "package://drake_skill_models/table.sdf"}
-- add_weld: {parent: world, child: table::table_top}
+ROBOT_FILE = model_url(models.ROBOT_FILE)
+ROBOT_DIRECTIVES = f"""
+- add_directives: {{file: "{ROBOT_FILE}"}}
+- add_model: {{name: table, file: "{model_url('table.sdf')}"}}
+- add_weld: {{parent: world, child: table::table_top}}
 """
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 #: The camera's pose: 1.3 m in front and 0.7 m to the right of the robot's base, 0.8 m up.
@@ -493,16 +494,15 @@ def same_station(a: str, b: str) -> bool:
 
 
 def _inlined(text: str) -> str:
-    from drake_skill.station.models import PACKAGE_NAME, models_dir
+    from drake_skill.station.models import model_url, url_path
     from pydrake.multibody.parsing import LoadModelDirectives
 
     config = yaml_load_typed(schema=StationConfig, data=text, defaults=StationConfig())
     flat = []
     for d in config.directives:
-        prefix = f"package://{PACKAGE_NAME}/"
-        if d.add_directives is not None and d.add_directives.file.startswith(prefix) \
+        if d.add_directives is not None and d.add_directives.file.startswith(model_url("")) \
                 and not d.add_directives.model_namespace:
-            flat += LoadModelDirectives(str(models_dir() / d.add_directives.file[len(prefix):])).directives
+            flat += LoadModelDirectives(str(url_path(d.add_directives.file))).directives
         else:
             flat.append(d)
     config.directives = flat
@@ -517,24 +517,13 @@ def object_joint_name(config: StationConfig) -> str:
 def _validate_directives(config: StationConfig) -> None:
     """Every ``add_model`` file exists; processed, the directives add the robot's model instances and
     the object's (an included ``add_directives`` file counts)."""
-    from drake_skill.station.models import PACKAGE_NAME, models_dir
     from drake_skill.station.placement import object_parts
 
     for i, d in enumerate(config.directives):
         if d.add_directives is not None:
             _check_file(f"directives[{i}].add_directives.file", d.add_directives.file, "directives")
         if d.add_model is not None:
-            url = d.add_model.file
-            if url.startswith(f"package://{PACKAGE_NAME}/"):
-                path = models_dir() / url[len(f"package://{PACKAGE_NAME}/"):]
-            elif url.startswith("file://"):
-                path = Path(url[len("file://"):])
-            else:
-                _bad(f"directives[{i}].add_model.file", url,
-                     f"package://{PACKAGE_NAME}/<file>, file:///<absolute path>, or a path relative to the "
-                     "scenario file")
-            if not path.is_file():
-                _bad(f"directives[{i}].add_model.file", url, f"an existing model file ({path} does not exist)")
+            _check_file(f"directives[{i}].add_model.file", d.add_model.file, "model")
     plant = _directives_plant(_directives_key(config.directives))
     added = sorted(plant.GetModelInstanceName(ModelInstanceIndex(i)) for i in range(2, plant.num_model_instances()))
     for name in ROBOT_MODELS:
@@ -551,12 +540,14 @@ def _validate_directives(config: StationConfig) -> None:
 
 
 def _check_file(field: str, url: str, what: str) -> None:
-    from drake_skill.station.models import PACKAGE_NAME, models_dir
+    """A directive's file URL names an existing local file (``station.models.url_path``)."""
+    from drake_skill.station.models import PACKAGE_NAME, url_path
 
-    prefix = f"package://{PACKAGE_NAME}/"
-    path = models_dir() / url[len(prefix):] if url.startswith(prefix) else \
-        Path(url[len("file://"):]) if url.startswith("file://") else None
-    if path is not None and not path.is_file():
+    path = url_path(url)
+    if path is None:
+        _bad(field, url, f"package://{PACKAGE_NAME}/<file>, file:///<absolute path>, or a path relative to the "
+             "scenario file")
+    if not path.is_file():
         _bad(field, url, f"an existing {what} file ({path} does not exist)")
 
 

@@ -30,6 +30,17 @@ def model_url(filename: str) -> str:
     return f"package://{PACKAGE_NAME}/{filename}"
 
 
+def url_path(url: str) -> Path | None:
+    """The local file a ``package://drake_skill_models/...`` or ``file://...`` URL names; None for
+    another scheme."""
+    prefix = model_url("")
+    if url.startswith(prefix):
+        return models_dir() / url[len(prefix):]
+    if url.startswith("file://"):
+        return Path(url[len("file://"):])
+    return None
+
+
 def add_package_paths(package_map) -> None:
     """Registers ``drake_skill_models`` in a Drake PackageMap (idempotent)."""
     if not package_map.Contains(PACKAGE_NAME):
