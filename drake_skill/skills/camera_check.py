@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-__all__ = ["CameraCheck", "FrameCheck", "check_camera", "object_labels"]
+__all__ = ["CameraCheck", "FrameCheck", "check_camera", "fit_plane", "object_labels", "object_truth", "segment_mask"]
 
 
 @dc.dataclass
@@ -87,6 +87,11 @@ def object_labels(station) -> np.ndarray:
     return np.array(sorted(labels), dtype=np.int64)
 
 
+def object_truth(station, context, labels) -> np.ndarray:
+    """(H, W) bool: the object camera's pixels whose render label is one of ``labels`` (``object_labels``)."""
+    return np.isin(station.GetOutputPort("object_label_image").Eval(context).data[:, :, 0], labels)
+
+
 def _joint_values(station, n_joints: int) -> np.ndarray:
     joint = station.object_joint
     lo, hi = float(joint.position_lower_limits()[0]), float(joint.position_upper_limits()[0])
@@ -101,7 +106,7 @@ def _pose_vector(X_WO) -> list[float]:
     return [float(p[0]), float(p[1]), float(X_WO.rotation().ToRollPitchYaw().yaw_angle())]
 
 
-def _segment_mask(station, context, seg_config, plane) -> np.ndarray:
+def segment_mask(station, context, seg_config, plane) -> np.ndarray:
     """(H, W) bool: the object camera's pixels that the segmenter keeps."""
     from drake_skill.perception.segmentation import segment_object
 
@@ -110,7 +115,8 @@ def _segment_mask(station, context, seg_config, plane) -> np.ndarray:
     return segment_object(cloud.xyzs().T, cloud.rgbs().T, plane, seg_config, shape).mask()
 
 
-def _fit_plane(station, context, seg_config, seed: int) -> np.ndarray:
+def fit_plane(station, context, seg_config, seed: int) -> np.ndarray:
+    """The table plane from the full frame at ``context``, as the segmenter fits it on a run's first frame."""
     from drake_skill.perception.segmentation import fit_table_plane
 
     cam = station.config.camera
@@ -139,7 +145,7 @@ def check_camera(station_config, skill_name: str, n_joints: int = 7, n_poses: in
         X_WO = station.random_object_pose(seed + k)
         station.set_object_pose(context, X_WO)
         station.set_object_joint(context, station_config.object.initial_joint)
-        plane = _fit_plane(station, context, seg_config.segmentation, seed)
+        plane = fit_plane(station, context, seg_config.segmentation, seed)
         for q in _joint_values(station, n_joints):
             station.set_object_joint(context, q)
             frames.append(_check_frame(station, context, seg_config.segmentation, plane, labels,
@@ -148,14 +154,14 @@ def check_camera(station_config, skill_name: str, n_joints: int = 7, n_poses: in
 
 
 def _check_frame(station, context, seg_config, plane, labels, pose, q) -> FrameCheck:
-    truth = np.isin(station.GetOutputPort("object_label_image").Eval(context).data[:, :, 0], labels)
+    truth = object_truth(station, context, labels)
     visible = int(truth.sum())
     if visible == 0:
         x, y, yaw = pose
         raise ValueError(f"the camera sees none of the object '{station.config.object.model}' at joint {q:.3g}, "
                          f"pose x {x:.3f} m, y {y:.3f} m, yaw {yaw:.3f} rad; aim the camera at the object "
                          "(the scenario's camera: X_PB) or place the object in its view (object.x/y)")
-    mask = _segment_mask(station, context, seg_config, plane)
+    mask = segment_mask(station, context, seg_config, plane)
     return FrameCheck(pose, q, visible, int((mask & truth).sum()), int((mask & ~truth).sum()))
 
 

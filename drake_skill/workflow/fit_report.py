@@ -101,19 +101,19 @@ class _Poser:
         station.set_object_joint(self.context, float(at(d.object_state_100hz)[0]))
 
     def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(rgb (h, w, 3), object truth, colour test, segment) of the object camera's crop."""
-        from drake_skill.perception.segmentation import segment_object, target_colour_mask
-        from drake_skill.skills.camera_check import _fit_plane
+        """(rgb (h, w, 3), object truth, colour test, segment) of the object camera's crop, by
+        ``skills --check-camera``'s functions (the segment on the object's pixels alone)."""
+        from drake_skill.perception.segmentation import target_colour_mask
+        from drake_skill.skills.camera_check import fit_plane, object_truth, segment_mask
 
         station, context = self.station, self.context
         if self.plane is None:
-            self.plane = _fit_plane(station, context, self.seg, 0)
+            self.plane = fit_plane(station, context, self.seg, 0)
         shape = station.object_camera.window.shape
-        cloud = station.GetOutputPort("object_point_cloud").Eval(context)
-        rgb = np.ascontiguousarray(cloud.rgbs().T)
-        truth = np.isin(station.GetOutputPort("object_label_image").Eval(context).data[:, :, 0], self.labels)
+        rgb = np.ascontiguousarray(station.GetOutputPort("object_point_cloud").Eval(context).rgbs().T)
+        truth = object_truth(station, context, self.labels)
         coloured = target_colour_mask(rgb, self.seg).reshape(shape) & truth
-        kept = segment_object(cloud.xyzs().T, rgb, self.plane, self.seg, shape).mask() & truth
+        kept = segment_mask(station, context, self.seg, self.plane) & truth
         return rgb.reshape(*shape, 3), truth, coloured, kept
 
 
