@@ -199,14 +199,13 @@ class Imitator:
 
     def _object_pose(self, demo):
         """The demonstration's X_WO_true as a RigidTransform, and whether its seed draws it."""
-        from drake_skill.learning.rollout import _X_from_vector
-        from drake_skill.station.recording import pose_to_vector
+        from drake_skill.station.recording import pose_to_vector, vector_to_pose
 
         X_demo = np.asarray(demo.X_WO_true, dtype=float)
         drawn = pose_to_vector(self.station.random_object_pose(int(demo.seed)))
         same = (np.abs(drawn[:3] - X_demo[:3]).max() <= _POSE_MATCH_M
                 and 1.0 - abs(float(np.dot(drawn[3:], X_demo[3:]))) <= _POSE_MATCH_Q)
-        return _X_from_vector(X_demo), same
+        return vector_to_pose(X_demo), same
 
     @contextlib.contextmanager
     def _placed(self, X_WO, drawn: bool):
