@@ -22,7 +22,9 @@ $(STAMP): pyproject.toml constraints.txt
 demo: setup
 	$(VENV)/bin/drake-skill learn --skill open --force
 
+# The page tests' browser (Debian's chromium and chromium-driver) is a test-only step.
 test: setup
+	@bash tools/ensure_system_deps.sh --test
 	$(PY) -m pytest -q -n 2 --dist loadscope
 
 bench: setup

@@ -169,14 +169,16 @@ def test_idle_session_runs_60_s_without_a_solver_failure():
     assert session.mode() == IDLE
 
 
-def test_an_interrupted_teleoperation_keeps_its_finished_demonstration(tmp_path, capsys):
-    """After 1 of 2 demonstrations, Ctrl-C (or SIGTERM) keeps that one: with --force it replaces
-    the old set, and the folder lists (issue 51 item 1)."""
+@pytest.mark.parametrize("stop", ["sigterm", "page closed"])
+def test_an_interrupted_teleoperation_keeps_its_finished_demonstration(tmp_path, capsys, stop):
+    """After 1 of 2 demonstrations, SIGTERM (as Ctrl-C) or closing the page keeps that one: with
+    --force it replaces the old set, and the folder lists (issue 51 item 1)."""
     import signal
+    import urllib.request
 
     from drake_skill.cli.main import main
     from drake_skill.demos.format import load_demonstrations
-    from drake_skill.demos.teleop import RecordingInterrupted, record_interactive_into
+    from drake_skill.demos.teleop import RecordingInterrupted, open_page, record_interactive_into
     from drake_skill.skills import load_skill
 
     station = load_skill("open").station_config()
@@ -187,20 +189,24 @@ def test_an_interrupted_teleoperation_keeps_its_finished_demonstration(tmp_path,
     (old / "demo_000.npz").write_bytes(b"an old set")
     (old / "demo_001.npz").write_bytes(b"an old set")
     meshcat = Meshcat()
+    page = open_page(meshcat, "test")
     demos_done, lines = [], []
 
     def user(t):
         if 0.3 <= t < 0.31:
             click(meshcat, RECORD_BUTTON)
         if 1.45 <= t < 1.46:
-            if demos_done:                       # the second demonstration: the user stops the program
+            if demos_done and stop == "sigterm":  # the second demonstration: the user stops the program
                 signal.raise_signal(signal.SIGTERM)
+            elif demos_done:                      # ... or closes the page (its pagehide beacon)
+                urllib.request.urlopen(urllib.request.Request(page.url + "closed", data=b"{}"), timeout=5)
             click(meshcat, STOP_BUTTON)
 
     config = TeleopConfig(realtime_rate=0.0, record_perception=False)
     handler = signal.getsignal(signal.SIGTERM)        # pytest-xdist's worker has one of its own
-    with pytest.raises(RecordingInterrupted, match="kept the 1 finished demonstration.*replace the old set"):
-        record_interactive_into(old, "open", 2, force=True, meshcat=meshcat, config=config, user=user,
+    why = "interrupted" if stop == "sigterm" else "the teleoperation page was closed"
+    with page, pytest.raises(RecordingInterrupted, match=f"^{why}; kept the 1 finished demonstration.*replace"):
+        record_interactive_into(old, "open", 2, force=True, meshcat=meshcat, config=config, user=user, page=page,
                                 station_config=station, status=lambda line: (lines.append(line), demos_done.append(line)
                                                                              if "kept" in line else None))
     (kept,) = load_demonstrations(old)

@@ -4,8 +4,12 @@ record: the scripted demonstrator (default) or you (``--interactive``)
 demonstrate a skill in the simulated station. Scripted: the human-like
 scripted demonstrator plays the skill (``drake_skill.demos.demonstrator``);
 a variation that fails the ground-truth judge is replaced by the next seed.
-Interactive: Meshcat opens, you drive the hand with sliders, keys or a
-gamepad and press Record / Stop (``drake_skill.demos.teleop``). Writes
+Interactive: drake-skill's teleoperation page opens (its URL is printed;
+the Meshcat view embedded, beside a panel that shows the state: idle or
+recording and its time, demonstration k of n, the last verdict and why, the
+time limits); you drive the hand with keys (while no text box has focus),
+Meshcat's sliders or a gamepad and press Record / Stop
+(``drake_skill.demos.teleop``). Writes
 ``OUT/demo_000.npz``, ``demo_001.npz``, ... (format:
 ``drake_skill.demos.format``), ``OUT/demos.json`` (the list of the set) and
 ``OUT/demos.png`` (the demonstrated hand paths in the object frame and the
@@ -16,8 +20,9 @@ replaced without ``--force``; with it the whole set is replaced at once
 (an interruption leaves the old set or the new one, never a mix).
 Interactive recordings keep each successful demonstration on disk as it
 ends (with ``--force`` the new set grows in ``.OUT.recording`` beside the
-old one): Ctrl-C or SIGTERM keeps every finished one (replacing the old set
-once one is finished), says how many, and exits with status 130.
+old one): Ctrl-C, SIGTERM or closing the page keeps every finished one
+(replacing the old set once one is finished), says how many, and exits with
+status 130.
 
 list: a table of a folder's demonstrations (index, file, skill, duration,
 samples, ground-truth success, source).
@@ -210,7 +215,7 @@ def record(args) -> int:
         except RecordingInterrupted as stop:
             import sys
 
-            print(f"drake-skill: interrupted; {stop}", file=sys.stderr)
+            print(f"drake-skill: {stop}", file=sys.stderr)
             return 130
     else:
         from drake_skill.demos.demonstrator import ScriptedDemonstrator

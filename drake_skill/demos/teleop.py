@@ -8,7 +8,14 @@ the station's one recording loop, with the diagram's ``ObjectSegmenter``):
 the measured hand pose in the object frame at 100 Hz and 10 Hz, the
 segmented object cloud at 10 Hz.
 
-Controls (the Meshcat page's control panel; keys act when the page has focus):
+Where: ``record_interactive`` opens drake-skill's own page
+(:mod:`drake_skill.demos.teleop_page`, its URL printed): the Meshcat view
+embedded, a panel with the session's state (idle, recording and its time,
+demonstration k of n, the last verdict and why, the time limits), and the
+keys, which act only while no text box has focus. Closing the page ends the
+session as Ctrl-C does, keeping every finished demonstration.
+
+Controls (keys on drake-skill's page; sliders and buttons in Meshcat's control panel):
 
 ===========  ======================  =========================================
 slider       keys (- / +)            meaning
@@ -110,7 +117,9 @@ class TeleopInputs:
     sliders: (7,) x, y, z [m, world], roll, pitch, yaw [deg, about world axes
     on top of the home orientation], gripper [m]; record_clicks, stop_clicks:
     the buttons' click counts; gamepad_axes: (>= 4,) in [-1, 1] or None when no
-    gamepad; gamepad_buttons: (>= 8,) in [0, 1] or None.
+    gamepad; gamepad_buttons: (>= 8,) in [0, 1] or None; key_steps: (7,) net key
+    presses per value since the last reading (drake-skill's page,
+    :mod:`drake_skill.demos.teleop_page`), each one ``key_step`` [m, deg, m], or None.
     """
 
     sliders: np.ndarray
@@ -118,6 +127,7 @@ class TeleopInputs:
     stop_clicks: int = 0
     gamepad_axes: np.ndarray | None = None
     gamepad_buttons: np.ndarray | None = None
+    key_steps: np.ndarray | None = None
 
 
 @dc.dataclass
@@ -144,22 +154,27 @@ class TeleopState:
 STATE_SIZE = 12
 
 
+def key_step(config: TeleopConfig) -> np.ndarray:
+    """(7,) the change of each value per key press, also the sliders' resolution [m, deg, m]."""
+    return np.r_[[config.position_step] * 3, [config.angle_step_deg] * 3, config.gripper_step]
+
+
 def slider_limits(X_WE_home: RigidTransform, config: TeleopConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(lower (7,), upper (7,), step (7,)) of the sliders around the home pose."""
     p = X_WE_home.translation()
     r, a = config.position_range, config.angle_range_deg
     lower = np.r_[p - r, -a, -a, -a, 0.0]
     upper = np.r_[p + r, a, a, a, config.gripper_max]
-    step = np.r_[[config.position_step] * 3, [config.angle_step_deg] * 3, config.gripper_step]
-    return lower, upper, step
+    return lower, upper, key_step(config)
 
 
 def teleop_step(state: TeleopState, inputs: TeleopInputs, dt: float, config: TeleopConfig,
                 lower: np.ndarray, upper: np.ndarray) -> tuple[TeleopState, bool]:
     """One update of the teleoperation logic (plain numpy).
 
-    The sliders are the target (keys move the sliders in the browser); a
-    gamepad adds velocity * dt on top. Record clicks start recording from
+    The sliders are the target (Meshcat's own keys move the sliders in the
+    browser); drake-skill's page adds its key presses (``key_steps`` *
+    :func:`key_step`) and a gamepad adds velocity * dt on top. Record clicks start recording from
     IDLE, stop clicks end it; clicks in other modes are consumed and ignored.
     Returns the new state and whether the target moved away from the sliders
     (the caller then writes the target back to the sliders).
@@ -169,6 +184,9 @@ def teleop_step(state: TeleopState, inputs: TeleopInputs, dt: float, config: Tel
     record = inputs.record_clicks > state.seen_record
     stop = inputs.stop_clicks > state.seen_stop
     pressed = state.gamepad_pressed.copy()
+    if inputs.key_steps is not None and np.any(inputs.key_steps != 0):
+        target = np.clip(target + np.asarray(inputs.key_steps) * key_step(config), lower, upper)
+        moved = True
     if inputs.gamepad_axes is not None and len(inputs.gamepad_axes) >= 4:
         axes = np.asarray(inputs.gamepad_axes, dtype=float)[:4]
         axes = np.where(np.abs(axes) < config.gamepad_deadband, 0.0, axes)
@@ -213,13 +231,19 @@ class MeshcatTeleop(LeafSystem):
     [1] (m), ``mode`` [1] (0 idle, 1 recording, 2 done). The state (target,
     mode, handled click counts) is the system's discrete state, updated every
     ``config.period`` s; Meshcat is only read (and its sliders written back
-    when a gamepad moved the target).
+    when a key or the gamepad moved the target).
+
+    page: a :class:`~drake_skill.demos.teleop_page.TeleopPage` whose keys
+    drive the hand; Meshcat's sliders and buttons then get no keys of their
+    own (Meshcat's key bindings ignore what has focus). Without a page, the
+    keys are bound on Meshcat's page.
     """
 
     def __init__(self, meshcat, X_WE_home: RigidTransform, config: TeleopConfig | None = None,
-                 gripper_home: float = 0.0):
+                 gripper_home: float = 0.0, page=None):
         super().__init__()
         self._meshcat = meshcat
+        self._page = page
         self._config = config or TeleopConfig()
         self._R_home = X_WE_home.rotation()
         self._lower, self._upper, self._step = slider_limits(X_WE_home, self._config)
@@ -239,15 +263,19 @@ class MeshcatTeleop(LeafSystem):
 
     def add_controls(self) -> None:
         """Adds (or resets) the sliders at the home pose and the buttons with zero clicks."""
-        m = self._meshcat
+        m, keyed = self._meshcat, self._page is None
         existing = set(m.GetSliderNames())
         for i, (name, dec, inc) in enumerate(SLIDERS):
             if name in existing:
                 m.SetSliderValue(name, self._home[i])
             else:
-                m.AddSlider(name, self._lower[i], self._upper[i], self._step[i], self._home[i], dec, inc)
-        m.AddButton(RECORD_BUTTON, RECORD_KEY)   # re-adding resets the click count to zero
-        m.AddButton(STOP_BUTTON, STOP_KEY)
+                m.AddSlider(name, self._lower[i], self._upper[i], self._step[i], self._home[i],
+                            *((dec, inc) if keyed else ()))
+        m.AddButton(RECORD_BUTTON, RECORD_KEY if keyed else "")   # re-adding resets the click count to zero
+        m.AddButton(STOP_BUTTON, STOP_KEY if keyed else "")
+        if self._page is not None:
+            self._page.take_key_steps()
+            self._page.reset_clicks()
 
     def read_inputs(self) -> TeleopInputs:
         m = self._meshcat
@@ -256,8 +284,13 @@ class MeshcatTeleop(LeafSystem):
         axes = buttons = None
         if gamepad.index is not None:
             axes, buttons = np.asarray(gamepad.axes, float), np.asarray(gamepad.button_values, float)
-        return TeleopInputs(sliders, m.GetButtonClicks(RECORD_BUTTON), m.GetButtonClicks(STOP_BUTTON),
-                            axes, buttons)
+        record, stop = m.GetButtonClicks(RECORD_BUTTON), m.GetButtonClicks(STOP_BUTTON)
+        steps = None
+        if self._page is not None:
+            steps = self._page.take_key_steps()
+            page_record, page_stop = self._page.clicks()
+            record, stop = record + page_record, stop + page_stop
+        return TeleopInputs(sliders, record, stop, axes, buttons, steps)
 
     def state(self, context) -> TeleopState:
         return TeleopState.from_vector(context.get_discrete_state(self._state).value())
@@ -284,10 +317,12 @@ class TeleopSession:
     """The station driven by :class:`MeshcatTeleop`, one diagram and simulator.
 
     meshcat: a ``pydrake.geometry.Meshcat`` (``StartMeshcat()``); the station
-    is drawn there and the controls are added to its page.
+    is drawn there and the controls are added to its page. page: drake-skill's
+    own :class:`~drake_skill.demos.teleop_page.TeleopPage`, which then owns
+    the keys and shows the session's state (None: keys on Meshcat's page).
     """
 
-    def __init__(self, skill, meshcat, config: TeleopConfig | None = None, station_config=None):
+    def __init__(self, skill, meshcat, config: TeleopConfig | None = None, station_config=None, page=None):
         from drake_skill.station.sim.builder import build_station
         from drake_skill.skills import load_skill
 
@@ -298,12 +333,13 @@ class TeleopSession:
         if not self.config.record_perception:
             station_config.enable_camera = False
         self.meshcat = meshcat
+        self.page = page
         builder = DiagramBuilder()
         self.station = builder.AddNamedSystem("station", build_station(station_config, meshcat))
         home_context = self.station.CreateDefaultContext()
         X_WE_home = self.station.GetOutputPort("ee_pose").Eval(home_context)
         self.teleop = builder.AddNamedSystem("teleop", MeshcatTeleop(
-            meshcat, X_WE_home, self.config, self.station.config.gripper_home))
+            meshcat, X_WE_home, self.config, self.station.config.gripper_home, page))
         builder.Connect(self.teleop.GetOutputPort("X_WE_desired"), self.station.GetInputPort("ee_pose_desired"))
         builder.Connect(self.teleop.GetOutputPort("gripper_command"), self.station.GetInputPort("gripper_command"))
         self.segmenter = None
@@ -329,6 +365,17 @@ class TeleopSession:
     def mode(self) -> int:
         return self.teleop.state(self.teleop.GetMyContextFromRoot(self.context)).mode
 
+    def _show(self, t_start: float | None = None) -> None:
+        """Puts the session's state on the page (if any) and raises PageClosed if it was closed."""
+        if self.page is None:
+            return
+        t = self.context.get_time()
+        mode = MODE_NAMES[self.mode()]
+        self.page.publish(mode=mode, max_wait=self.config.max_wait, max_duration=self.config.max_duration,
+                          wait_left=max(self.config.max_wait - t, 0.0) if t_start is None else None,
+                          recording_s=None if t_start is None else t - t_start)
+        self.page.check_open()
+
     def record(self, seed: int, user: Callable[[float], None] | None = None, status=print):
         """Waits for Record, records until Stop, returns the Demonstration.
 
@@ -343,7 +390,7 @@ class TeleopSession:
         from drake_skill.demos.demonstrator import demonstration_from
         from drake_skill.demos.force_margin import margin_warnings
         from drake_skill.station.recording import StationRecorder
-        from drake_skill.station.success import judge_run
+        from drake_skill.station.success import judge_run, verdict_why
 
         config = self.config
         X_WO = self.reset(seed)
@@ -356,6 +403,7 @@ class TeleopSession:
         idle.anchor()
         while self.mode() == IDLE:
             t = self.context.get_time()
+            self._show()
             if t > config.max_wait:
                 raise TimeoutError(f"{RECORD_BUTTON} was not pressed within {config.max_wait} s")
             if user is not None:
@@ -374,45 +422,90 @@ class TeleopSession:
             if user is not None:
                 user(recorder.next_time())
             recorder.sample(float(gripper.Eval(teleop_context)[0]))
+            self._show(t_start)
             done = self.mode() == DONE or recorder.next_time() - t_start > config.max_duration
             if done and recorder.at_frame and recorder.n_samples >= min_raw:
                 break
-        success = judge_run(recorder.times, recorder.obj, recorder.force, self.station.config.success)
+        rule = self.station.config.success
+        success = judge_run(recorder.times, recorder.obj, recorder.force, rule)
+        why = verdict_why(recorder.times, recorder.obj, recorder.force, rule)
         metadata = {"source": "interactive", "teleop_config": dc.asdict(config),
                     "recording_started_at_s": t_start,
                     "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
+        if self.page is not None and self.page.note:
+            metadata["note"] = self.page.note
         demo = demonstration_from(recorder, self.skill, seed, X_WO, success, metadata)
-        status(f"recorded {demo.duration:.1f} s: {'success' if success else 'FAILURE'} "
-               f"(final object state {demo.final_object_state:.3f})")
+        if self.page is not None:
+            self.page.publish(mode="done", last_verdict="success" if success else "failure", last_why=why)
+        status(f"recorded {demo.duration:.1f} s: {'success' if success else 'FAILURE'} ({why})")
         for message in margin_warnings(demo, self.station.config.reflex, f"this demonstration (seed {seed})"):
             status(f"warning: {message}")
         return demo
 
 
+KEY_LEGEND = ("W/S x, A/D y, E/Q z\nL/J roll, I/K pitch, O/U yaw\nX/Z gripper open/close\n"
+              "R record, T stop")
+
+
+def open_page(meshcat, title: str, **kwargs):
+    """drake-skill's teleoperation page for ``meshcat`` (:class:`~drake_skill.demos.teleop_page.TeleopPage`),
+    with this module's keys; ``kwargs`` go to it (host, port, heartbeat_timeout)."""
+    from drake_skill.demos.teleop_page import TeleopPage
+
+    return TeleopPage(meshcat.web_url(), [(dec, inc) for _, dec, inc in SLIDERS], RECORD_KEY, STOP_KEY,
+                      legend=KEY_LEGEND, title=title, **kwargs)
+
+
 def record_interactive(skill, count: int, seed: int = 0, config: TeleopConfig | None = None,
-                       meshcat=None, status=print, station_config=None, on_demo=None, user=None) -> list:
+                       meshcat=None, status=print, station_config=None, on_demo=None, user=None,
+                       page=None) -> list:
     """Records ``count`` successful interactive demonstrations (a failed one is repeated
-    on the next seed). Starts Meshcat if none is given and prints its URL.
+    on the next seed). Starts Meshcat if none is given, and drake-skill's teleoperation
+    page (:func:`open_page`) if ``page`` is None, and prints the page's URL.
 
     ``on_demo(demo)`` is called with each successful demonstration as it
     ends (:func:`record_interactive_into` keeps it on disk there); ``user``
     is passed to :meth:`TeleopSession.record` (tests drive the page with it).
+    Raises :class:`~drake_skill.demos.teleop_page.PageClosed` (a
+    KeyboardInterrupt) when the page is closed.
     """
     if meshcat is None:
         from pydrake.geometry import StartMeshcat
         meshcat = StartMeshcat()
-    status(f"Meshcat: {meshcat.web_url()}  (open it in a browser; keys act when the page has focus)")
-    status("keys: W/S x, A/D y, E/Q z, L/J roll, I/K pitch, O/U yaw, X/Z gripper; "
-           "R record, T stop")
-    session = TeleopSession(skill, meshcat, config, station_config=station_config)
+    own_page = page is None
+    if own_page:
+        from drake_skill.skills import load_skill
+
+        page = open_page(meshcat, f"drake-skill teleoperation: {load_skill(skill).name}")
+    log: list[str] = []
+
+    def say(line: str) -> None:
+        status(line)
+        log.append(line)
+        page.publish(log=log[-8:])
+
+    try:
+        say(f"open {page.url} in a browser (drake-skill's teleoperation page; the Meshcat view "
+            f"{meshcat.web_url()} is embedded)")
+        say("keys (while no text box has focus): " + KEY_LEGEND.replace("\n", ", "))
+        return _record_count(TeleopSession(skill, meshcat, config, station_config=station_config, page=page),
+                             count, seed, say, on_demo, user)
+    finally:
+        if own_page:
+            page.close()
+
+
+def _record_count(session: TeleopSession, count: int, seed: int, status, on_demo, user) -> list:
     demos = []
     while len(demos) < count:
+        session.page.publish(demo=len(demos) + 1, count=count, kept=len(demos))
         demo = session.record(seed, user=user, status=status)
         seed += 1
         if demo.success:
             demos.append(demo)
             if on_demo is not None:
                 on_demo(demo)
+            session.page.publish(kept=len(demos))
             status(f"demonstration {len(demos)} of {count} kept")
         else:
             status("not a success by the ground-truth judge; once more, on the next object pose")
@@ -431,8 +524,8 @@ def record_interactive_into(directory, skill, count: int, force: bool = False, e
 
     ``force`` replaces a set already there (the new one grows beside it and
     replaces it whole). Ctrl-C or SIGTERM keeps every finished demonstration
-    (replacing the old set once one is finished) and raises
-    :class:`RecordingInterrupted` saying how many were kept. ``extra(tmp,
+    (replacing the old set once one is finished), as does closing the page, and
+    raises :class:`RecordingInterrupted` saying why and how many were kept. ``extra(tmp,
     demos)`` writes more files into the finished set (``demos record``'s plot);
     ``kwargs`` go to :func:`record_interactive`.
     """
@@ -443,6 +536,9 @@ def record_interactive_into(directory, skill, count: int, force: bool = False, e
     try:
         with terminate_as_interrupt():
             demos = record_interactive(skill, count, on_demo=writer.add, **kwargs)
-    except KeyboardInterrupt:
-        raise RecordingInterrupted(writer.interrupted()) from None
+    except KeyboardInterrupt as stop:
+        from drake_skill.demos.teleop_page import PageClosed
+
+        why = "the teleoperation page was closed" if isinstance(stop, PageClosed) else "interrupted"
+        raise RecordingInterrupted(f"{why}; {writer.interrupted()}") from None
     return writer.finish(extra=None if extra is None else lambda tmp: extra(tmp, demos)), demos

@@ -52,3 +52,13 @@ def rule_text(rule: SuccessConfig) -> str:
     if rule.above is not None:
         return f"{rule.joint} >= {rule.above:g}"
     return f"{rule.joint} <= {rule.below:g}"
+
+
+def verdict_why(times, object_state, contact_force, rule: SuccessConfig) -> str:
+    """Why :func:`judge_run` decided as it did, in a few words for a person watching:
+    ``lid_hinge 1.82 (rule >= 1.7), the hand left`` or ``... the hand still touched the scene``."""
+    final = float(np.asarray(object_state)[-1])
+    bound = f">= {rule.above:g}" if rule.above is not None else f"<= {rule.below:g}"
+    left = ("the hand left" if hand_left(times, contact_force, rule)
+            else f"the hand still touched the scene in the last {rule.settle_time:g} s")
+    return f"{rule.joint} {final:.3f} (rule {bound}), {left}"
