@@ -91,6 +91,7 @@ class _BrowserUser:
             note.click()
             note.send_keys("w")
             self.wait(lambda: self.page.note == "w")
+            self.wait(lambda: self.find("keys").text != "keys: live")
             self.seen["keys_while_typing"] = self.find("keys").text
             time.sleep(0.3)
             self.seen["typed_keys"] = len(self.page.key_times())
@@ -128,7 +129,8 @@ def test_keys_in_a_real_browser_drive_the_hand_and_the_page_shows_the_state(tmp_
             paths, (demo,) = record_interactive_into(tmp_path / "by_hand", "open", 1, meshcat=meshcat,
                                                      config=config, station_config=station, user=user,
                                                      page=page, status=lines.append)
-            shown = {id_: driver.find_element("id", id_).text for id_ in ("mode", "last", "demo")}
+            user.wait(lambda: user.find("demo").text.endswith("(kept 1)"))   # the page polls every 0.2 s
+            shown = {id_: user.find(id_).text for id_ in ("mode", "last", "demo")}
         finally:
             driver.quit()
     assert user.seen["idle"][0] == "demonstration 1 of 1 (kept 0)"

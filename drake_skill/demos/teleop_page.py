@@ -239,7 +239,7 @@ const KEYS = new Set(__KEYS__);
 const $ = (id) => document.getElementById(id);
 function typing() {
   const el = document.activeElement;
-  return !!el && (el.tagName === "INPUT" || el.tagName === "TEXTAREA" || el.tagName === "SELECT" || el.isContentEditable);
+  return !!el && (["INPUT", "TEXTAREA", "SELECT"].includes(el.tagName) || el.isContentEditable);
 }
 document.addEventListener("keydown", (e) => {
   if (typing() || !KEYS.has(e.code) || e.ctrlKey || e.metaKey || e.altKey) return;
@@ -248,7 +248,9 @@ document.addEventListener("keydown", (e) => {
 });
 $("note").addEventListener("input", () =>
   fetch("/note", {method: "POST", body: JSON.stringify({text: $("note").value})}));
-$("panel").addEventListener("mousedown", (e) => { if (e.target.id !== "note") setTimeout(() => $("panel").focus(), 0); });
+$("panel").addEventListener("mousedown", (e) => {
+  if (e.target.id !== "note") setTimeout(() => $("panel").focus(), 0);
+});
 addEventListener("pagehide", () => navigator.sendBeacon("/closed", "{}"));
 function keysState() {
   const k = $("keys");
@@ -257,6 +259,8 @@ function keysState() {
     k.className = "off"; k.textContent = "keys: off (the 3D view has focus); click this panel"; }
   else { k.className = "live"; k.textContent = "keys: live"; }
 }
+for (const event of ["focusin", "focusout"]) document.addEventListener(event, () => setTimeout(keysState, 0));
+addEventListener("blur", () => setTimeout(keysState, 0));
 function fmt(s) { return s == null ? "" : Number(s).toFixed(1); }
 function render(s) {
   const m = $("mode");
