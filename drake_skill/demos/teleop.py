@@ -52,7 +52,6 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
 
-from drake_skill.common import frame_meshcat_camera
 
 
 IDLE, RECORDING, DONE = 0, 1, 2
@@ -313,6 +312,13 @@ class MeshcatTeleop(LeafSystem):
         output.SetAtIndex(0, float(self.state(context).mode))
 
 
+def frame_teleop_view(meshcat, object_xyz) -> None:
+    """Meshcat's camera behind the robot, over its right shoulder, on the object [m, world]: the
+    keys then move the hand as they read on screen (W away, A left, E up)."""
+    target = np.asarray(object_xyz, dtype=float) + np.array([-0.1, 0.0, 0.15])
+    meshcat.SetCameraPose(target + np.array([-0.45, -1.0, 0.75]), target)
+
+
 class TeleopSession:
     """The station driven by :class:`MeshcatTeleop`, one diagram and simulator.
 
@@ -356,7 +362,7 @@ class TeleopSession:
         self.diagram.SetDefaultContext(self.context)
         self.context.SetTime(0.0)
         self.X_WO = self.station.reset(self.context, seed)
-        frame_meshcat_camera(self.meshcat, self.X_WO.translation())   # the view opens on the workspace
+        frame_teleop_view(self.meshcat, self.X_WO.translation())   # the view opens on the workspace
         self.teleop.add_controls()
         self.simulator.Initialize()
         self.simulator.AdvanceTo(0.0)

@@ -273,8 +273,9 @@ function render(s) {
     last.textContent = "last: " + s.last_verdict + " (" + (s.last_why || "") + ")";
   }
   if (s.max_wait != null)
-    $("limits").textContent = "press Record within " + fmt(s.max_wait) + " s (" + fmt(s.wait_left) +
-      " s left); a recording stops by itself after " + fmt(s.max_duration) + " s";
+    $("limits").textContent = "press Record within " + fmt(s.max_wait) + " s" +
+      (s.wait_left == null ? "" : " (" + fmt(s.wait_left) + " s left)") +
+      "; a recording stops by itself after " + fmt(s.max_duration) + " s";
   $("log").textContent = (s.log || []).join("\\n");
 }
 async function poll() {
