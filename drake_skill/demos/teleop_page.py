@@ -8,7 +8,7 @@ label or text widget). Patching Drake's meshcat.js is not an option. So
 loopback interface (Python's standard ``http.server``, one thread):
 
 * the Meshcat view fills the right of the page in an ``<iframe>``, its camera
-  set on the workspace (``common.frame_meshcat_camera``); its control panel
+  set behind the robot on the object (``teleop.frame_teleop_view``); its control panel
   keeps the sliders and buttons for the mouse, with no keys bound to them;
 * the page's own key handler sends a key to the session only when no text
   box has focus (``typing()`` below), and shows whether keys are live (a click
