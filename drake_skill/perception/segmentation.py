@@ -75,6 +75,7 @@ __all__ = [
     "VALUE_MIN",
     "ObjectBox",
     "FrameResult",
+    "SegmentPixels",
     "Segmentation",
     "SegmentationConfig",
     "check_organised_cloud",
@@ -85,6 +86,7 @@ __all__ = [
     "process_frame",
     "resample_points",
     "segment_object",
+    "segment_pixels",
     "select_regions",
     "target_colour_mask",
 ]
@@ -455,6 +457,42 @@ def segment_object(xyz, rgb, plane, config: SegmentationConfig, image_shape) -> 
         sel = select_regions(labels, n_clusters, config.cluster_rule, config.min_region_fraction)
         idx, p = idx[sel], p[sel]
     return Segmentation(idx, p.astype(np.float64), int(keep.sum()), n_clusters, shape)
+
+
+@dc.dataclass
+class SegmentPixels:
+    """One organised frame's pixels as the segmenter saw them (an H x W image).
+
+    rgb: (H, W, 3) uint8 colour image. coloured: (H, W) bool, the pixels that pass
+    the colour test (:func:`target_colour_mask`), wherever they are. kept: (H, W)
+    bool, the segment's pixels (:meth:`Segmentation.mask`); every kept pixel is
+    coloured, so ``kept.sum() / coloured.sum()`` is the share of the
+    object-coloured pixels that the crop, the table removal and the cluster
+    rule leave in the segment.
+    """
+
+    rgb: np.ndarray
+    coloured: np.ndarray
+    kept: np.ndarray
+
+    def counts(self) -> tuple[int, int]:
+        """(object-coloured pixels, kept pixels)."""
+        return int(np.count_nonzero(self.coloured)), int(np.count_nonzero(self.kept))
+
+    def downscaled(self, stride: int) -> "SegmentPixels":
+        """Every ``stride``-th pixel of each row and column (nearest-pixel sampling, so kept stays coloured)."""
+        arrays = (self.rgb, self.coloured, self.kept)
+        return SegmentPixels(*(np.ascontiguousarray(a[::stride, ::stride]) for a in arrays))
+
+
+def segment_pixels(rgb, config: SegmentationConfig, image_shape,
+                   segmentation: "Segmentation | None" = None) -> SegmentPixels:
+    """:class:`SegmentPixels` of one frame: rgb (P, 3) uint8 (P = H * W) and the frame's
+    :func:`segment_object` result (None: nothing kept, as before the table plane is known)."""
+    shape = (int(image_shape[0]), int(image_shape[1]))
+    rgb = np.asarray(rgb)
+    kept = segmentation.mask() if segmentation is not None else np.zeros(shape, dtype=bool)
+    return SegmentPixels(rgb.reshape(*shape, 3).copy(), target_colour_mask(rgb, config).reshape(shape), kept)
 
 
 # --------------------------------------------------------------------------- box

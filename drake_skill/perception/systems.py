@@ -143,8 +143,10 @@ from drake_skill.perception.pcae import (CODE_SIZE, N_POINTS, PointCloudAutoenco
 from drake_skill.perception.segmentation import (
     BOUNDING_BOX_SIZE,
     SegmentationConfig,
+    SegmentPixels,
     fit_table_plane,
     process_frame,
+    segment_pixels,
 )
 
 __all__ = ["ObjectSegmenter", "ObjectSegmenterConfig", "add_object_segmenter", "segmenter_config_for_station",
@@ -326,6 +328,15 @@ class ObjectSegmenter(LeafSystem):
         ``segmentation`` holds the object's pixels before resampling), or None
         when no table plane is available yet."""
         return self._frame_cache.Eval(context).result
+
+    def eval_pixels(self, context) -> SegmentPixels:
+        """The current frame's colour image, object-coloured pixels and the segment's pixels
+        (:func:`~drake_skill.perception.segmentation.segment_pixels`; nothing kept before the
+        table plane is known). A demonstration's recorder counts them at every frame."""
+        _, rgb = self._read_cloud(context)
+        result = self.eval_frame(context)
+        return segment_pixels(rgb, self._config.segmentation, self._image_shape,
+                              None if result is None else result.segmentation)
 
     def table_plane(self, context) -> np.ndarray | None:
         """The table plane stored in ``context`` (None until it has been fitted)."""

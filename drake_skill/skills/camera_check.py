@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-__all__ = ["CameraCheck", "FrameCheck", "check_camera", "fit_plane", "object_labels", "object_truth", "segment_mask"]
+__all__ = ["CameraCheck", "FrameCheck", "check_camera", "fit_plane", "frame_pixels", "object_labels", "object_truth"]
 
 
 @dc.dataclass
@@ -106,13 +106,15 @@ def _pose_vector(X_WO) -> list[float]:
     return [float(p[0]), float(p[1]), float(X_WO.rotation().ToRollPitchYaw().yaw_angle())]
 
 
-def segment_mask(station, context, seg_config, plane) -> np.ndarray:
-    """(H, W) bool: the object camera's pixels that the segmenter keeps."""
-    from drake_skill.perception.segmentation import segment_object
+def frame_pixels(station, context, seg_config, plane):
+    """The object camera's crop at ``context`` as the segmenter sees it: colour image, object-coloured
+    pixels and the segment's pixels (a :class:`~drake_skill.perception.segmentation.SegmentPixels`)."""
+    from drake_skill.perception.segmentation import segment_object, segment_pixels
 
     cloud = station.GetOutputPort("object_point_cloud").Eval(context)
     shape = station.object_camera.window.shape
-    return segment_object(cloud.xyzs().T, cloud.rgbs().T, plane, seg_config, shape).mask()
+    xyz, rgb = cloud.xyzs().T, cloud.rgbs().T
+    return segment_pixels(rgb, seg_config, shape, segment_object(xyz, rgb, plane, seg_config, shape))
 
 
 def fit_plane(station, context, seg_config, seed: int) -> np.ndarray:
@@ -161,7 +163,7 @@ def _check_frame(station, context, seg_config, plane, labels, pose, q) -> FrameC
         raise ValueError(f"the camera sees none of the object '{station.config.object.model}' at joint {q:.3g}, "
                          f"pose x {x:.3f} m, y {y:.3f} m, yaw {yaw:.3f} rad; aim the camera at the object "
                          "(the scenario's camera: X_PB) or place the object in its view (object.x/y)")
-    mask = segment_mask(station, context, seg_config, plane)
+    mask = frame_pixels(station, context, seg_config, plane).kept
     return FrameCheck(pose, q, visible, int((mask & truth).sum()), int((mask & ~truth).sum()))
 
 

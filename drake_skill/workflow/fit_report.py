@@ -103,18 +103,14 @@ class _Poser:
     def frame(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(rgb (h, w, 3), object truth, colour test, segment) of the object camera's crop, by
         ``skills --check-camera``'s functions (the segment on the object's pixels alone)."""
-        from drake_skill.perception.segmentation import target_colour_mask
-        from drake_skill.skills.camera_check import fit_plane, object_truth, segment_mask
+        from drake_skill.skills.camera_check import fit_plane, frame_pixels, object_truth
 
         station, context = self.station, self.context
         if self.plane is None:
             self.plane = fit_plane(station, context, self.seg, 0)
-        shape = station.object_camera.window.shape
-        rgb = np.ascontiguousarray(station.GetOutputPort("object_point_cloud").Eval(context).rgbs().T)
+        pixels = frame_pixels(station, context, self.seg, self.plane)
         truth = object_truth(station, context, self.labels)
-        coloured = target_colour_mask(rgb, self.seg).reshape(shape) & truth
-        kept = segment_mask(station, context, self.seg, self.plane) & truth
-        return rgb.reshape(*shape, 3), truth, coloured, kept
+        return pixels.rgb, truth, pixels.coloured & truth, pixels.kept & truth
 
 
 def _snapshot_times(demo) -> list[tuple[str, float]]:
