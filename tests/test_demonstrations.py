@@ -14,10 +14,12 @@ from drake_skill.demos.format import (
     DemonstrationError,
     demo_path,
     downsample_action,
+    first_move,
     load_demonstration,
     load_demonstrations,
     object_frame_poses,
     save_demonstration,
+    snapshot_frames,
 )
 
 
@@ -26,7 +28,8 @@ def _vec(X):
 
 
 def make_demo(seed=0, perception=True, skill="open", n=121) -> Demonstration:
-    """A valid synthetic demonstration: n samples at 100 Hz, every 10th at 10 Hz."""
+    """A valid synthetic demonstration: n samples at 100 Hz, every 10th at 10 Hz; schema 2's fields
+    (with perception, the segment's counts and 3 pictures of 6 x 8 pixels; touching from sample 5)."""
     rng = np.random.default_rng(seed)
     t = np.arange(n) / 100.0
     X_WO = RigidTransform(RollPitchYaw(0, 0, 0.05), [0.6, 0.01, 0.0])
@@ -40,6 +43,7 @@ def make_demo(seed=0, perception=True, skill="open", n=121) -> Demonstration:
         extra = dict(object_points=rng.normal(size=(m, 2048, 3)).astype(np.float32),
                      perception_valid=rng.uniform(size=m) > 0.1,
                      X_WO_start=_vec(X_WO) + np.r_[0.002, -0.001, 0, 0, 0, 0, 0])
+    extra.update(_schema2(seed, m, perception))
     return Demonstration(
         skill=skill, seed=seed, success=True, final_object_state=1.6,
         times_100hz=t, X_OE_100hz=X_OE_raw, q_100hz=rng.normal(size=(n, 7)),
@@ -48,11 +52,28 @@ def make_demo(seed=0, perception=True, skill="open", n=121) -> Demonstration:
         metadata={"source": "test", "variation": {"pause_s": 0.25}}, **extra)
 
 
+def _schema2(seed: int, m: int, perception: bool) -> dict:
+    """Schema 2's fields for m samples (their own generator: make_demo's other arrays keep their values)."""
+    rng = np.random.default_rng([seed, 2])
+    fields = dict(peak_force=np.where(np.arange(m) >= 5, rng.uniform(0.6, 3.0, m), 0.0))
+    if perception:
+        coloured = rng.integers(5000, 6000, m)
+        fields.update(pixels_coloured=coloured, pixels_kept=coloured - rng.integers(0, 100, m),
+                      snapshot_index=np.array([0, 5, m - 1]),
+                      snapshot_rgb=rng.integers(0, 256, (3, 6, 8, 3), dtype=np.uint8),
+                      snapshot_segment=rng.integers(0, 3, (3, 6, 8), dtype=np.uint8))
+    return fields
+
+
+SCHEMA2_FIELDS = ("peak_force", "pixels_coloured", "pixels_kept", "snapshot_index", "snapshot_rgb",
+                  "snapshot_segment")
+
+
 def _assert_same(a: Demonstration, b: Demonstration):
     for f in ("skill", "seed", "success", "final_object_state", "metadata"):
         assert getattr(a, f) == getattr(b, f), f
     for f in ("times_100hz", "X_OE_100hz", "q_100hz", "gripper_100hz", "object_state_100hz",
-              "times", "X_OE", "X_WO_true", "X_WO_start", "object_points", "perception_valid"):
+              "times", "X_OE", "X_WO_true", "X_WO_start", "object_points", "perception_valid") + SCHEMA2_FIELDS:
         x, y = getattr(a, f), getattr(b, f)
         if x is None:
             assert y is None, f
@@ -146,8 +167,57 @@ def test_wrong_schema_version_is_refused(tmp_path):
     arrays["metadata"] = np.array(json.dumps(meta))
     path = _write_arrays(tmp_path / "demo_000.npz", arrays)
     with pytest.raises(DemonstrationError, match=rf"demo_000.npz: field 'metadata.schema_version' is "
-                                                 rf"{SCHEMA_VERSION + 1}; this drake-skill reads version 1"):
+                                                 rf"{SCHEMA_VERSION + 1}; this drake-skill reads versions 1, 2$"):
         load_demonstration(path)
+    meta["schema_version"] = 2.0      # a number that equals a version is not one
+    arrays["metadata"] = np.array(json.dumps(meta))
+    _write_arrays(path, arrays)
+    with pytest.raises(DemonstrationError, match=r"'metadata.schema_version' is 2.0; this drake-skill reads versions"):
+        load_demonstration(path)
+
+
+@pytest.mark.parametrize("perception", [True, False])
+def test_a_schema_1_file_still_loads(tmp_path, perception):
+    """A file written before schema 2 (no peak_force, pixels_* or snapshot_*) loads unchanged; schema-2
+    arrays in a version-1 file are not read; saved again, it is a schema-2 file without them."""
+    demo = make_demo(perception=perception)
+    arrays = {k: v for k, v in demo.to_arrays().items() if k not in SCHEMA2_FIELDS}
+    meta = json.loads(arrays["metadata"].item())
+    meta["schema_version"] = 1
+    arrays["metadata"] = np.array(json.dumps(meta))
+    path = _write_arrays(tmp_path / "demo_000.npz", arrays)
+    old = load_demonstration(path)
+    assert not old.has_segment and all(getattr(old, f) is None for f in SCHEMA2_FIELDS)
+    for f in ("times_100hz", "X_OE_100hz", "q_100hz", "times", "X_OE", "object_points", "perception_valid"):
+        assert np.array_equal(getattr(old, f), getattr(demo, f), equal_nan=False) or getattr(demo, f) is None, f
+    _write_arrays(path, dict(arrays, peak_force=np.full(13, -1.0)))      # ignored in version 1
+    assert load_demonstration(path).peak_force is None
+    again = load_demonstration(save_demonstration(old, tmp_path / "demo_001.npz"))
+    assert again.peak_force is None and not again.has_segment
+    with np.load(tmp_path / "demo_001.npz", allow_pickle=False) as data:
+        assert json.loads(data["metadata"].item())["schema_version"] == 2 and "peak_force" not in data
+
+
+def test_schema_2_fields_round_trip_and_mean_what_they_say(tmp_path):
+    demo = make_demo()
+    back = load_demonstration(save_demonstration(demo, tmp_path / "demo_000.npz"))
+    assert back.has_segment and back.snapshot_index.tolist() == [0, 5, 12] and back.snapshot_rgb.shape == (3, 6, 8, 3)
+    assert np.all(back.pixels_kept <= back.pixels_coloured) and np.all(back.peak_force >= 0)
+    assert back.peak_force.dtype == np.float64 and back.pixels_kept.dtype == np.int64
+    no_camera = make_demo(perception=False)
+    assert no_camera.peak_force.shape == (13,) and not no_camera.has_segment
+
+
+def test_snapshot_frames_first_contact_else_first_move_else_middle():
+    force, still = np.r_[0.0, 0.0, 0.4, 0.7, 2.0, 0.0], np.zeros(6)
+    assert [k.tolist() for k in snapshot_frames(force, still)[0:1]] == [[0, 3, 5]]
+    assert snapshot_frames(force, still)[1] == ["start", "first contact", "end"]
+    moving = np.r_[0.0, 0.0, 0.0, 0.01, 0.5, 1.0]         # 1 % of the travel is not a move, 50 % is
+    index, labels = snapshot_frames(np.zeros(6), moving)
+    assert index.tolist() == [0, 4, 5] and labels[1] == "object first moves" and first_move(moving) == 4
+    index, labels = snapshot_frames(np.zeros(7), np.r_[0.0, 1e-9, 0.0, 2e-4, 0, 0, 0])   # noise: no move
+    assert index.tolist() == [0, 3, 6] and labels[1] == "middle" and first_move(np.zeros(7)) is None
+    assert first_move(np.r_[1.0, 1.0, 0.5]) == 2         # travel either way
 
 
 def test_foreign_npz_is_refused(tmp_path):
@@ -563,6 +633,29 @@ def _set_item(field, index, value):
                                          r"expected \(13,\) bool"),
     (_set(perception_valid=np.ones(12, dtype=bool)), r"field 'perception_valid' has shape \(12,\) dtype bool"),
     (_set(perception_valid=[True] * 13), r"field 'perception_valid' has shape None dtype None; expected \(13,\) bool"),
+    # schema 2
+    (_set_item("peak_force", 3, -0.5), r"field 'peak_force' has a negative force at sample 3$"),
+    (_set(peak_force=np.zeros(12)), r"field 'peak_force' has shape \(12,\); expected \(13,\)"),
+    (_set(snapshot_rgb=None), r"field 'snapshot_rgb' is missing while pixels_coloured, pixels_kept, snapshot_index, "
+                              r"snapshot_segment is present; the segment's counts and pictures come together$"),
+    (_set(object_points=None, perception_valid=None, X_WO_start=None),
+     r"field 'pixels_coloured' is present without the perception fields"),
+    (_set(pixels_coloured=np.ones(13)), r"field 'pixels_coloured' has shape \(13,\) dtype float64; expected \(13,\) "
+                                        r"integers$"),
+    (_set_item("pixels_kept", 4, -1), r"field 'pixels_kept' has a negative count at sample 4$"),
+    (_set_item("pixels_kept", 7, 10**6), r"field 'pixels_kept' sample 7 keeps 1000000 of \d+ object-coloured pixels; "
+                                         r"the segment keeps object-coloured pixels only$"),
+    (_set(snapshot_index=np.array([0, 5, 11])),
+     r"field 'snapshot_index' is \[0, 5, 11\]; expected 3 integers \[0, first contact, 12\] \(10 Hz samples: "
+     r"start, first contact, end\)$"),
+    (_set(snapshot_index=np.array([0, 13, 12])), r"field 'snapshot_index' is \[0, 13, 12\]"),
+    (_set(snapshot_index=np.zeros((3, 2), dtype=int)), r"field 'snapshot_index' is \(3, 2\); expected"),
+    (_set(snapshot_rgb=np.zeros((3, 6, 8), dtype=np.uint8)), r"field 'snapshot_rgb' has shape \(3, 6, 8\) dtype "
+                                                             r"uint8; expected \(3, h, w, 3\) uint8$"),
+    (_set(snapshot_segment=np.zeros((3, 6, 8), dtype=bool)), r"field 'snapshot_segment' has shape \(3, 6, 8\) "
+                                                             r"dtype bool; expected \(3, 6, 8\) uint8 like"),
+    (_set_item("snapshot_segment", (1, 2, 3), 3), r"field 'snapshot_segment' holds the value 3; expected 0 \(not "
+                                                  r"object-coloured\), 1 \(object-coloured, dropped\) or 2 \(kept\)$"),
 ])
 def test_each_invalid_field_is_named(change, message):
     demo = make_demo()

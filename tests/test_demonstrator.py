@@ -7,7 +7,7 @@ import pytest
 from pydrake.common.eigen_geometry import Quaternion
 from pydrake.math import RigidTransform, RollPitchYaw
 
-from drake_skill.demos.format import load_demonstration, save_demonstration
+from drake_skill.demos.format import CONTACT_FORCE_N, load_demonstration, save_demonstration
 from drake_skill.demos.demonstrator import (
     DemonstratorConfig,
     DemonstratorError,
@@ -18,7 +18,7 @@ from drake_skill.demos.demonstrator import (
     pose_to_vector,
 )
 from drake_skill.perception.systems import ObjectSegmenter, segmenter_config_for_station
-from drake_skill.station.pose_source import hold_plan
+from drake_skill.station.pose_source import PosePlan, hold_plan
 from drake_skill.skills import keyframes, load_skill
 from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.sim.simulation import StationSimulation
@@ -191,6 +191,9 @@ def test_perception_is_recorded_at_10_hz_on_the_action_instants():
     assert demo.object_points.shape == (11, 2048, 3) and demo.object_points.dtype == np.float32
     assert demo.perception_valid.all()
     assert demo.times.tolist() == pytest.approx(np.arange(11) * 0.1)
+    # Schema 2: nothing touched, nothing moved: the middle frame is the third picture.
+    assert demo.snapshot_index.tolist() == [0, 5, 10] and demo.metadata["snapshot_labels"][1] == "middle"
+    assert not demo.peak_force.any() and demo.pixels_kept.min() > 0.98 * demo.pixels_coloured.max()
     # The perceived object pose is the ground truth within a centimetre and 2 degrees.
     err = X_WO.inverse() @ RigidTransform(Quaternion(demo.X_WO_start[3:]), demo.X_WO_start[:3])
     assert np.linalg.norm(err.translation()) < 0.01
@@ -225,3 +228,46 @@ def test_cli_records_files_table_and_plot_and_never_overwrites(tmp_path, capsys)
     assert main(["record", "--skill", "draw", "--count", "1", "--no-camera", "--out", str(out)]) == 2
     assert "already holds 1 demonstration file(s) (demo_000.npz); pass --force" in capsys.readouterr().err
     assert (out / "demo_000.npz").read_bytes() == before
+
+
+def test_a_recording_keeps_the_segments_pixels_the_peak_force_and_three_frames(tmp_path):
+    """Schema 2 (issue 51 item 2): the hand lowered onto Open's closed lid (seed 5) in 2 s. Per 10 Hz frame
+    the peak contact force of its raw samples, the object-coloured pixels and those the segment kept; the
+    pictures at the start, the first touch and the end."""
+    sim = StationSimulation(scenario_for_skill("open"), perceive=True)
+    X_WO = sim.reset(5)
+    home = sim.home_pose()
+    above = [RigidTransform(home.rotation(), X_WO @ np.array([0.0, 0.0, z])) for z in (0.25, 0.162)]
+    sim.set_plan(PosePlan.from_poses([0.0, 0.6, 1.6, 2.0], [home, above[0], above[1], above[1]], [0.0] * 4))
+    recorder = sim.recorder(100.0, 10.0)
+    recorder.anchor()
+    for _ in range(201):
+        recorder.sample(0.0)
+    demo = demonstration_from(recorder, "open", 5, X_WO, success=False, metadata={"source": "test"})
+    # The peak force per frame is the recorder's over the frame's raw samples (10 k - 9 .. 10 k).
+    force = np.array(recorder.force)
+    expected = [force[0]] + [force[10 * k - 9:10 * k + 1].max() for k in range(1, 21)]
+    np.testing.assert_array_equal(demo.peak_force, expected)
+    assert demo.peak_force.max() == demo.metadata["peak_contact_force_N"] > 10.0       # 16.5 N measured
+    # First contact: the first frame over CONTACT_FORCE_N, the hand reaching the lid at 1.7 s.
+    touch = int(np.argmax(demo.peak_force > CONTACT_FORCE_N))
+    assert 15 <= touch <= 19 and not demo.peak_force[:touch].any()
+    assert demo.snapshot_index.tolist() == [0, touch, 20]
+    assert demo.metadata["snapshot_labels"] == ["start", "first contact", "end"]
+    # The segment keeps 98.6-98.8 % of the object-coloured pixels throughout (the box's lowest band is table).
+    coloured, kept = demo.pixels_coloured, demo.pixels_kept
+    assert np.all(kept <= coloured) and np.all(kept > 0.98 * coloured) and np.all(kept < coloured)
+    assert 15_000 < coloured.min() < coloured.max() < 22_000            # the hand hides some of the box
+    seg_context = sim.segmenter.GetMyContextFromRoot(sim.context)                     # at the last frame
+    assert sim.segmenter.eval_pixels(seg_context).counts() == (coloured[-1], kept[-1])
+    assert kept[-1] == sim.segmenter.eval_frame(seg_context).segmentation.indices.size
+    # Three pictures, every 4th pixel of the 282 x 265 crop; their masks sample the counted ones.
+    assert demo.snapshot_rgb.shape == (3, 67, 71, 3) and demo.snapshot_segment.shape == (3, 67, 71)
+    np.testing.assert_allclose(16 * np.sum(demo.snapshot_segment == 2, axis=(1, 2)), kept[[0, touch, 20]], rtol=0.05)
+    np.testing.assert_allclose(16 * np.sum(demo.snapshot_segment > 0, axis=(1, 2)), coloured[[0, touch, 20]],
+                               rtol=0.05)
+    back = load_demonstration(save_demonstration(demo, tmp_path / "demo_000.npz"))
+    for name in ("peak_force", "pixels_coloured", "pixels_kept", "snapshot_index", "snapshot_rgb", "snapshot_segment"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(demo, name), err_msg=name)
+    added = sum(v.nbytes for k, v in back.to_arrays().items() if k.startswith(("peak", "pixels", "snapshot")))
+    assert added < 60_000                                                # 58 kB

@@ -57,6 +57,13 @@ def test_export_has_robomimics_layout(tmp_path, demo_dir):
             if d.has_perception:
                 np.testing.assert_array_equal(obs["object_points"][()], d.object_points)
                 assert obs["object_points"].dtype == np.float32
+            # Schema 2: per-sample columns in obs, the three pictures beside the 100 Hz data.
+            np.testing.assert_array_equal(obs["peak_force"][()], d.peak_force[:, None])
+            assert ("pixels_coloured" in obs) == ("snapshot_rgb" in g["drake_skill"]) == d.has_perception
+            if d.has_perception:
+                np.testing.assert_array_equal(obs["pixels_kept"][()], d.pixels_kept[:, None])
+                assert obs["pixels_coloured"].dtype == np.int64 and obs["pixels_coloured"].shape == (n, 1)
+                np.testing.assert_array_equal(g["drake_skill/snapshot_segment"][()], d.snapshot_segment)
             # Actions: the next sample's hand pose (the last repeats its own) and the gripper command.
             act = g["actions"][()]
             assert act.shape == (n, 8)
@@ -310,3 +317,18 @@ def test_robomimic_edges_found_by_mutation(tmp_path, monkeypatch):
     with pytest.raises(ImportError) as e:
         robomimic._h5py()
     assert str(e.value) == "the robomimic format needs h5py: pip install 'h5py>=3.10'"
+
+
+def test_a_schema_1_demonstration_goes_through_robomimic_without_the_new_fields(tmp_path):
+    import dataclasses as dc
+
+    from drake_skill.demos.robomimic import read_robomimic
+    from test_demonstrations import SCHEMA2_FIELDS
+
+    old = dc.replace(make_demo(0), **dict.fromkeys(SCHEMA2_FIELDS))
+    path, demos = _export(tmp_path, [old])
+    with h5py.File(path, "r") as f:
+        assert not {"peak_force", "pixels_coloured", "pixels_kept"} & set(f["data/demo_0/obs"])
+        assert "snapshot_rgb" not in f["data/demo_0/drake_skill"]
+    back, = read_robomimic(path)
+    _assert_same(old, back)

@@ -24,7 +24,10 @@ recording would:
   the diagram, the very system skill executions use (the same 2048 points, and
   an invalid frame holds the last valid one), a validity flag, and the
   perceived X_WO at the first valid frame. The full 640 x 480 clouds are not kept: 100 frames of
-  307,200 points are ~370 MB per demonstration.
+  307,200 points are ~370 MB per demonstration. Per frame, how many pixels were
+  object-coloured and how many the segment kept, the peak contact force, and three
+  small pictures with the segment (start, first contact, end; schema 2,
+  ``drake_skill.demos.format``).
 
 Human-like variation (``DemonstratorConfig``, all drawn from the seed):
 per-segment timing scale and via-point position noise (``scripted_plan``), a
@@ -50,7 +53,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_skill import configs
 from drake_skill.configs import load_typed
-from drake_skill.demos.format import Demonstration, downsample_action, object_frame_poses
+from drake_skill.demos.format import Demonstration, downsample_action, object_frame_poses, snapshot_frames
 from drake_skill.demos.force_margin import peaks
 from drake_skill.station.pose_source import PosePlan
 from drake_skill.station.recording import ReflexError, StationRecorder, pose_to_vector
@@ -235,7 +238,8 @@ def demonstration_from(recorder: StationRecorder, skill: str, seed: int, X_WO_tr
                        success: bool, metadata: dict) -> Demonstration:
     """Assembles a :class:`~drake_skill.station.recording.StationRecorder`'s samples
     (record_hz, frames at action_hz; with perception, the ObjectSegmenter's
-    points) into a Demonstration (times start at 0). Its metadata gets the
+    points, pixel counts and three pictures, ``metadata["snapshot_labels"]``
+    naming them) into a Demonstration (times start at 0). Its metadata gets the
     reflex monitor's peaks and their times [s]: ``peak_contact_force_N``,
     ``peak_contact_force_time_s``, ``peak_external_torque_Nm`` (7) and
     ``peak_external_torque_time_s`` (7) (``drake_skill.demos.force_margin``)."""
@@ -247,6 +251,10 @@ def demonstration_from(recorder: StationRecorder, skill: str, seed: int, X_WO_tr
     X_WO = pose_to_vector(X_WO_true)
     X_OE_raw = object_frame_poses(X_WO, np.array(recorder.X_WE))
     idx, t10, X_OE = downsample_action(times, X_OE_raw, recorder.frame_hz)
+    obj = np.array(recorder.obj)
+    peak_force = np.array(recorder.frame_force, dtype=float)
+    if peak_force.size != idx.size:
+        raise AssertionError(f"{peak_force.size} frame forces for {idx.size} 10 Hz samples")
     perception = {}
     if recorder.segmenter is not None:
         if len(recorder.points) != idx.size:
@@ -257,8 +265,9 @@ def demonstration_from(recorder: StationRecorder, skill: str, seed: int, X_WO_tr
         perception = dict(object_points=np.stack(recorder.points).astype(np.float32),
                           perception_valid=np.array(recorder.valid, dtype=bool),
                           X_WO_start=recorder.X_WO_perceived)
-        metadata = dict(metadata, X_WO_start_frame=int(recorder.X_WO_frame))
-    obj = np.array(recorder.obj)
+        segment, labels = _segment_fields(recorder, peak_force, obj[idx])
+        perception.update(segment)
+        metadata = dict(metadata, X_WO_start_frame=int(recorder.X_WO_frame), snapshot_labels=labels)
     # The reflex monitor's peaks and their times, for the force margin (drake_skill.demos.force_margin).
     force, t_force = peaks(times, recorder.force)
     torque, t_torque = peaks(times, np.reshape(recorder.torque, (-1, 7)))
@@ -268,7 +277,19 @@ def demonstration_from(recorder: StationRecorder, skill: str, seed: int, X_WO_tr
         skill=skill, seed=int(seed), success=bool(success), final_object_state=float(obj[-1]),
         times_100hz=times, X_OE_100hz=X_OE_raw, q_100hz=np.array(recorder.q),
         gripper_100hz=np.array(recorder.grip), object_state_100hz=obj,
-        times=t10, X_OE=X_OE, X_WO_true=X_WO, metadata=metadata, **perception)
+        times=t10, X_OE=X_OE, X_WO_true=X_WO, peak_force=peak_force, metadata=metadata, **perception)
+
+
+def _segment_fields(recorder: StationRecorder, peak_force: np.ndarray,
+                    object_state: np.ndarray) -> tuple[dict[str, np.ndarray], list[str]]:
+    """The recorder's pixel counts and its start / first contact / end pictures as the
+    Demonstration's ``pixels_*`` and ``snapshot_*`` fields, and the pictures' labels."""
+    index, labels = snapshot_frames(peak_force, object_state)
+    counts = np.array(recorder.pixel_counts, dtype=np.int64).reshape(-1, 2)
+    shots = [recorder.pixels[k] for k in index]
+    return dict(pixels_coloured=counts[:, 0], pixels_kept=counts[:, 1], snapshot_index=index,
+                snapshot_rgb=np.stack([p.rgb for p in shots]),
+                snapshot_segment=np.stack([p.coloured.astype(np.uint8) + p.kept for p in shots])), labels
 
 
 # --------------------------------------------------------------------------- demonstrator

@@ -33,6 +33,23 @@ Fields of :class:`Demonstration` (T raw samples at 100 Hz, T10 at 10 Hz):
 ``object_points``      (T10, N, 3)     segmented object points in W [m],
                        float32         N = 2048 (docs/method.md section 3), or None
 ``perception_valid``   (T10,) bool     segmentation found the object, or None
+``peak_force``         (T10,) float64  peak filtered robot-scene contact force [N]
+                                       over the raw samples since the previous
+                                       10 Hz sample (the first: its own), or
+                                       None (schema 1); 0 on the robot, which
+                                       measures joint torques, not contact force
+``pixels_coloured``    (T10,) int64    object-coloured pixels (the segmenter's
+                                       colour test) of the camera image the
+                                       segmenter read, or None
+``pixels_kept``        (T10,) int64    of those, the pixels the segment kept
+                                       (<= pixels_coloured), or None
+``snapshot_index``     (3,) int64      the 10 Hz samples shown as pictures: 0
+                                       (start), first contact, T10 - 1 (end)
+``snapshot_rgb``       (3, h, w, 3)    their camera images, downscaled (every
+                       uint8           k-th pixel, w <= 80), or None
+``snapshot_segment``   (3, h, w) uint8 per pixel 0: not object-coloured, 1:
+                                       object-coloured but dropped by the
+                                       segment, 2: kept; or None
 ``skill``, ``seed``, ``success``, ``final_object_state``
                                        what was demonstrated, the seed that
                                        produced it, the ground-truth verdict
@@ -45,14 +62,30 @@ frame, 100 frames for a 10 s demonstration, ~370 MB as float32 xyz + rgb.
 The segmented object (2048 points per frame, ~8 MB per demonstration) is what
 the goal model uses.
 
-File format (``SCHEMA_VERSION`` = 1): a numpy ``.npz`` written atomically,
+Schema 2 adds ``peak_force`` and, with the camera, the segment's pixel counts
+and three small pictures (``pixels_*``, ``snapshot_*``): enough to see
+afterwards, also for a demonstration recorded on the robot, when the segment
+lost the object (``drake-skill fit``'s ``fit_report.html`` and its warnings).
+"First contact" is the first 10 Hz sample whose ``peak_force`` exceeds
+:data:`CONTACT_FORCE_N` (free motion reads 0 N); without one (no touch, or
+the robot) the first at which the object state moved :data:`MOVE_FRACTION`
+of its travel (of :data:`MIN_TRAVEL` or more), else the middle sample; ``metadata["snapshot_labels"]`` says
+which. Their size: 24 bytes per 10 Hz sample (``peak_force`` and the two
+counts) and, at w x h pixels, 12 w h bytes for the pictures; measured on a
+14.6 s scripted demonstration of Open (147 samples, crop 282 x 265 -> 71 x 67
+pixels): 3.5 kB + 57 kB = 61 kB, 1.6 % of its 3.9 MB file.
+
+File format (``SCHEMA_VERSION`` = 2; version 1 files, without the schema-2
+fields, still load): a numpy ``.npz`` written atomically,
 readable with ``np.load(path, allow_pickle=False)``. Every field above is an
 array of the same name (``skill`` a 0-d unicode array, ``seed`` int64,
 ``success`` bool, ``final_object_state`` float64); ``metadata`` is a 0-d
 unicode array holding a JSON object with ``schema``, ``schema_version``,
 ``units``, ``frames``, ``rates_hz`` and the extras. The perception fields are
 absent when the demonstration was recorded without a camera
-(``metadata["has_perception"]`` is false).
+(``metadata["has_perception"]`` is false); each schema-2 group
+(``peak_force``; ``pixels_*`` with ``snapshot_*``) is present or absent as a
+whole (absent: a demonstration converted from version 1 or imported).
 """
 
 from __future__ import annotations
@@ -72,6 +105,9 @@ from drake_skill.action.quaternion import make_quaternions_continuous, quat_conj
 __all__ = [
     "SCHEMA",
     "SCHEMA_VERSION",
+    "READ_VERSIONS",
+    "CONTACT_FORCE_N",
+    "MOVE_FRACTION",
     "MIN_SAMPLES",
     "N_POINTS",
     "Demonstration",
@@ -79,6 +115,8 @@ __all__ = [
     "DemonstrationError",
     "object_frame_poses",
     "downsample_action",
+    "first_move",
+    "snapshot_frames",
     "save_demonstration",
     "load_demonstration",
     "load_demonstrations",
@@ -91,7 +129,16 @@ __all__ = [
 ]
 
 SCHEMA = "drake-skill-demonstration"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: The versions :func:`load_demonstration` reads (1: before peak_force, pixels_* and snapshot_*).
+READ_VERSIONS = (1, 2)
+#: A 10 Hz sample whose peak contact force exceeds this [N] touches the object ("first contact"):
+#: free motion reads exactly 0 N, a scripted demonstration's first touch 0.5-10 N.
+CONTACT_FORCE_N = 0.5
+#: The object "moves" once its state is this share of its whole travel away from the start ...
+MOVE_FRACTION = 0.02
+#: ... of at least this much [rad or m] (less is the simulator's or the sensor's noise: it did not move).
+MIN_TRAVEL = 1e-3
 #: Fewest 10 Hz samples a demonstration may have (1 s of motion).
 MIN_SAMPLES = 10
 QUATERNION_TOLERANCE = 1e-3
@@ -112,6 +159,8 @@ UNITS = {
     "object_state_100hz": "rad (box lid angle) or m (drawer travel)",
     "X_WO_true": "m, unit quaternion wxyz", "X_WO_start": "m, unit quaternion wxyz",
     "object_points": "m", "final_object_state": "rad (box lid angle) or m (drawer travel)",
+    "peak_force": "N", "pixels_coloured": "pixels", "pixels_kept": "pixels",
+    "snapshot_segment": "0 not object-coloured, 1 object-coloured but dropped, 2 kept",
 }
 FRAMES = {
     "X_OE_100hz": "pose of the hand TCP frame E in the object frame O",
@@ -124,6 +173,9 @@ FRAMES = {
 _RAW = ("times_100hz", "X_OE_100hz", "q_100hz", "gripper_100hz", "object_state_100hz")
 _PERCEPTION = ("X_WO_start", "object_points", "perception_valid")
 _SCALARS = ("skill", "seed", "success", "final_object_state")
+#: Schema 2's camera group (needs the perception fields).
+_SEGMENT = ("pixels_coloured", "pixels_kept", "snapshot_index", "snapshot_rgb", "snapshot_segment")
+_SCHEMA2 = ("peak_force",) + _SEGMENT
 
 
 class DemonstrationError(ValueError):
@@ -153,6 +205,12 @@ class Demonstration:
     X_WO_start: np.ndarray | None = None
     object_points: np.ndarray | None = None
     perception_valid: np.ndarray | None = None
+    peak_force: np.ndarray | None = None
+    pixels_coloured: np.ndarray | None = None
+    pixels_kept: np.ndarray | None = None
+    snapshot_index: np.ndarray | None = None
+    snapshot_rgb: np.ndarray | None = None
+    snapshot_segment: np.ndarray | None = None
     metadata: dict[str, Any] = dc.field(default_factory=dict)
     #: The file it was loaded from (not stored in the file; None when recorded in memory).
     path: str | None = dc.field(default=None, compare=False)
@@ -160,6 +218,11 @@ class Demonstration:
     @property
     def has_perception(self) -> bool:
         return self.object_points is not None
+
+    @property
+    def has_segment(self) -> bool:
+        """The segment's pixel counts and pictures are stored (schema 2, recorded with the camera)."""
+        return self.pixels_coloured is not None
 
     @property
     def duration(self) -> float:
@@ -222,11 +285,33 @@ class Demonstration:
                     _fail(where, "object_points", f"frame {k} is marked valid but its cloud is degenerate "
                           f"(bounding box {np.ptp(pts[k], axis=0).round(4).tolist()} m; expected at least "
                           f"{MIN_CLOUD_EXTENT_M} m along two axes); mark it invalid in perception_valid")
+        self._validate_schema2(where, m)
         try:
             json.dumps(self.metadata)
         except (TypeError, ValueError) as e:
             _fail(where, "metadata", f"is not JSON-serialisable ({e})")
         return self
+
+    def _validate_schema2(self, where: str, m: int) -> None:
+        """Checks ``peak_force`` and the ``pixels_*`` / ``snapshot_*`` group (module docstring)."""
+        if self.peak_force is not None and np.any(_array(where, "peak_force", self.peak_force, (m,)) < 0):
+            _fail(where, "peak_force", f"has a negative force at sample {int(np.argmax(self.peak_force < 0))}")
+        present = [name for name in _SEGMENT if getattr(self, name) is not None]
+        if present and len(present) != len(_SEGMENT):
+            missing = sorted(set(_SEGMENT) - set(present))
+            _fail(where, missing[0], f"is missing while {', '.join(present)} is present; the segment's "
+                  "counts and pictures come together")
+        if not present:
+            return
+        if not self.has_perception:
+            _fail(where, "pixels_coloured", "is present without the perception fields (object_points, ...)")
+        coloured = _counts(where, "pixels_coloured", self.pixels_coloured, (m,))
+        kept = _counts(where, "pixels_kept", self.pixels_kept, (m,))
+        if np.any(kept > coloured):
+            k = int(np.argmax(kept > coloured))
+            _fail(where, "pixels_kept", f"sample {k} keeps {kept[k]} of {coloured[k]} object-coloured pixels; "
+                  "the segment keeps object-coloured pixels only")
+        _snapshots(where, self.snapshot_index, self.snapshot_rgb, self.snapshot_segment, m)
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """The arrays stored in the ``.npz`` (metadata as a JSON string)."""
@@ -246,6 +331,7 @@ class Demonstration:
         arrays.update({name: getattr(self, name) for name in _RAW})
         if self.has_perception:
             arrays.update({name: getattr(self, name) for name in _PERCEPTION})
+        arrays.update({name: getattr(self, name) for name in _SCHEMA2 if getattr(self, name) is not None})
         return arrays
 
 
@@ -307,6 +393,35 @@ def _poses(where, field, value, n) -> np.ndarray:
     return x
 
 
+def _counts(where, field, value, shape) -> np.ndarray:
+    if not isinstance(value, np.ndarray) or value.dtype.kind not in "iu" or value.shape != shape:
+        _fail(where, field, f"has shape {getattr(value, 'shape', None)} dtype {getattr(value, 'dtype', None)}; "
+              f"expected {shape} integers")
+    if np.any(value < 0):
+        _fail(where, field, f"has a negative count at sample {int(np.argmax(value < 0))}")
+    return value
+
+
+def _snapshots(where, index, rgb, segment, m) -> None:
+    """snapshot_index (3,) 0 <= first contact <= m - 1 in order, from 0 to m - 1; rgb (3, h, w, 3) and
+    segment (3, h, w) uint8 with values 0, 1, 2."""
+    if not isinstance(index, np.ndarray) or index.dtype.kind not in "iu" or index.shape != (3,) \
+            or index[0] != 0 or index[2] != m - 1 or not 0 <= index[1] <= m - 1:
+        shown = index.tolist() if isinstance(index, np.ndarray) and index.size <= 3 else getattr(index, "shape", index)
+        _fail(where, "snapshot_index", f"is {shown!r}; expected 3 integers [0, first contact, {m - 1}] "
+              "(10 Hz samples: start, first contact, end)")
+    if not isinstance(rgb, np.ndarray) or rgb.dtype != np.uint8 or rgb.ndim != 4 or rgb.shape[0] != 3 \
+            or rgb.shape[3] != 3 or min(rgb.shape) < 1:
+        _fail(where, "snapshot_rgb", f"has shape {getattr(rgb, 'shape', None)} dtype {getattr(rgb, 'dtype', None)}; "
+              "expected (3, h, w, 3) uint8")
+    if not isinstance(segment, np.ndarray) or segment.dtype != np.uint8 or segment.shape != rgb.shape[:3]:
+        _fail(where, "snapshot_segment", f"has shape {getattr(segment, 'shape', None)} dtype "
+              f"{getattr(segment, 'dtype', None)}; expected {rgb.shape[:3]} uint8 like snapshot_rgb")
+    if segment.max() > 2:
+        _fail(where, "snapshot_segment", f"holds the value {int(segment.max())}; expected 0 (not object-coloured), "
+              "1 (object-coloured, dropped) or 2 (kept)")
+
+
 # ---------------------------------------------------------------- pose math
 def object_frame_poses(X_WO, X_WE) -> np.ndarray:
     """X_OE = X_WO^-1 X_WE for poses as 7-vectors.
@@ -348,6 +463,32 @@ def downsample_action(times_100hz, X_OE_100hz, rate_hz: float = ACTION_HZ):
     X = np.asarray(X_OE_100hz, dtype=float)[idx].copy()
     X[:, 3:] = make_quaternions_continuous(X[:, 3:])
     return idx, t[idx].copy(), X
+
+
+def first_move(object_state) -> int | None:
+    """The first sample at which the object state is :data:`MOVE_FRACTION` of its whole travel away
+    from the start (None when it never moves, or by less than :data:`MIN_TRAVEL`)."""
+    s = np.asarray(object_state, dtype=float)
+    away = np.abs(s - s[0])
+    if away.max() < MIN_TRAVEL:
+        return None
+    return int(np.flatnonzero(away > MOVE_FRACTION * away.max())[0])
+
+
+def snapshot_frames(peak_force, object_state) -> tuple[np.ndarray, list[str]]:
+    """The 10 Hz samples stored as pictures, ``[0, first contact, T10 - 1]``, and their labels, from
+    each sample's peak contact force [N] and object state (module docstring: the first touch over
+    :data:`CONTACT_FORCE_N`, else the object's first move, else the middle)."""
+    n = len(peak_force)
+    touch = np.flatnonzero(np.asarray(peak_force) > CONTACT_FORCE_N)
+    moved = first_move(object_state)
+    if touch.size:
+        k, label = int(touch[0]), "first contact"
+    elif moved is not None:
+        k, label = moved, "object first moves"
+    else:
+        k, label = n // 2, "middle"
+    return np.array([0, k, n - 1], dtype=np.int64), ["start", label, "end"]
 
 
 # ---------------------------------------------------------------- files
@@ -395,9 +536,9 @@ def load_demonstration(path) -> Demonstration:
         _fail(where, "metadata", f"names schema {meta.get('schema') if isinstance(meta, dict) else None!r}; "
               f"expected {SCHEMA!r}")
     version = meta.get("schema_version")
-    if version != SCHEMA_VERSION:
-        _fail(where, "metadata.schema_version", f"is {version!r}; this drake-skill reads version "
-              f"{SCHEMA_VERSION}")
+    if type(version) is not int or version not in READ_VERSIONS:
+        _fail(where, "metadata.schema_version", f"is {version!r}; this drake-skill reads versions "
+              f"{', '.join(map(str, READ_VERSIONS))}")
     has_perception = bool(meta.get("has_perception", False))
     required = ("times", "X_OE", "X_WO_true") + _RAW + _SCALARS + (_PERCEPTION if has_perception else ())
     for name in required:
@@ -413,6 +554,7 @@ def load_demonstration(path) -> Demonstration:
         times=data["times"], X_OE=data["X_OE"], X_WO_true=data["X_WO_true"],
         **{name: data[name] for name in _RAW},
         **({name: data[name] for name in _PERCEPTION} if has_perception else {}),
+        **{name: data[name] for name in _SCHEMA2 if version >= 2 and name in data},
         metadata=extras, path=where,
     )
     return demo.validate(where)

@@ -18,6 +18,11 @@ data and of its camera frames; docs/method.md section 1), T10 of them:
                                                  (simulator or sensor ground truth)
 ``obs/object_points``            (T10, N, 3) f32 segmented object cloud in W [m]
 ``obs/object_points_valid``      (T10,) bool     the segmentation found the object
+``obs/peak_force``               (T10, 1) f64    peak contact force since the
+                                                 previous sample [N] (schema 2)
+``obs/pixels_coloured``          (T10, 1) i64    object-coloured pixels of the
+                                                 camera image (schema 2)
+``obs/pixels_kept``              (T10, 1) i64    of those, kept by the segment
 ``actions``                      (T10, 8) f64    [X_OE of the next sample (7),
                                                  gripper opening (1)]
 ``rewards``, ``dones``           (T10,) f64/i64  1 at the last sample (reward only
@@ -28,12 +33,14 @@ The demonstration format records the *measured* hand pose, not a commanded
 one, so the action at sample t is the hand pose reached at sample t + 1 (an
 absolute pose target, as the DMP's output X_OE is), the last sample's
 repeating its own pose; the gripper's is its command. The object-cloud keys
-are absent for demonstrations recorded without a camera.
+are absent for demonstrations recorded without a camera, the schema-2 keys for
+demonstrations that lack those fields (``drake_skill.demos.format``).
 
 So that ``demos import`` gives back the very arrays of the ``.npz`` files,
 bit for bit, each ``demo_N`` also holds a group ``drake_skill`` with the
 fields robomimic's samples leave out (the 100 Hz raw streams, the sample
-times, the object poses) and attributes ``skill``, ``seed``, ``success``,
+times, the object poses, schema 2's three pictures ``snapshot_index``,
+``snapshot_rgb`` and ``snapshot_segment``) and attributes ``skill``, ``seed``, ``success``,
 ``final_object_state``, ``metadata`` (JSON) and ``source_file``. robomimic
 reads only the keys it is configured with and ignores the group.
 
@@ -58,6 +65,10 @@ __all__ = ["FORMATS", "export_robomimic", "import_robomimic", "read_robomimic"]
 FORMATS = ("robomimic",)
 #: The Demonstration arrays kept in data/demo_N/drake_skill (the rest are read from obs).
 _RAW = ("times_100hz", "X_OE_100hz", "q_100hz", "gripper_100hz", "object_state_100hz", "times", "X_WO_true")
+#: Schema 2's per-sample fields, kept in obs as (T10, 1) columns.
+_COLUMNS = ("peak_force", "pixels_coloured", "pixels_kept")
+#: Schema 2's pictures, kept in data/demo_N/drake_skill.
+_SNAPSHOTS = ("snapshot_index", "snapshot_rgb", "snapshot_segment")
 
 
 def _h5py():
@@ -121,6 +132,9 @@ def export_robomimic(directory, out_path) -> tuple[Path, list[Demonstration]]:
             if d.has_perception:
                 obs.create_dataset("object_points", data=d.object_points, compression="gzip", compression_opts=4)
                 obs["object_points_valid"] = d.perception_valid
+            for name in _COLUMNS:
+                if getattr(d, name) is not None:
+                    obs[name] = getattr(d, name)[:, None]
             g["actions"] = actions(d)
             done = np.zeros(d.n_samples, dtype=np.int64)
             done[-1] = 1
@@ -131,6 +145,9 @@ def export_robomimic(directory, out_path) -> tuple[Path, list[Demonstration]]:
                 raw[name] = getattr(d, name)
             if d.has_perception:
                 raw["X_WO_start"] = d.X_WO_start
+            if d.has_segment:
+                for name in _SNAPSHOTS:
+                    raw[name] = getattr(d, name)
             raw.attrs["skill"] = d.skill
             raw.attrs["seed"] = np.int64(d.seed)
             raw.attrs["success"] = bool(d.success)
@@ -200,11 +217,14 @@ def _read_demos(f, path: Path) -> list[Demonstration]:
             perception = dict(object_points=_get(where, g["obs"], "object_points"),
                               perception_valid=_get(where, g["obs"], "object_points_valid"),
                               X_WO_start=_get(where, raw, "X_WO_start"))
+        schema2 = {name: np.reshape(_get(where, g["obs"], name), -1) for name in _COLUMNS if name in obs}
+        if "pixels_coloured" in obs:
+            schema2.update({name: _get(where, raw, name) for name in _SNAPSHOTS})
         demo = Demonstration(
             skill=str(attrs["skill"]), seed=int(attrs["seed"]), success=bool(attrs["success"]),
             final_object_state=float(attrs["final_object_state"]),
             X_OE=_get(where, g["obs"] if "obs" in g else g, "hand_pose"),
-            **{n: _get(where, raw, n) for n in _RAW}, **perception, metadata=metadata, path=where)
+            **{n: _get(where, raw, n) for n in _RAW}, **perception, **schema2, metadata=metadata, path=where)
         demos.append(demo.validate(where))
     return demos
 

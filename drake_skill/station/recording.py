@@ -29,6 +29,9 @@ from drake_skill.station.interface import StationInterface
 
 
 _TERMINATED = SimulatorStatus.ReturnReason.kReachedTerminationCondition
+#: A recorder with a segmenter keeps each frame's pixels at most this wide (every k-th pixel): about
+#: 20 kB a frame in memory, ~15 kB of it the colour image.
+FRAME_WIDTH_PX = 80
 
 
 def pose_to_vector(X: RigidTransform) -> np.ndarray:
@@ -148,6 +151,13 @@ class StationRecorder:
     X_WO read from ``segmenter`` (an ``ObjectSegmenter`` wired to the
     station's cloud in the same diagram).
 
+    Per frame it also keeps ``frame_force``, the peak of ``force`` over the samples
+    since the previous frame (this one included) [N], and, with a segmenter,
+    ``pixel_counts`` (object-coloured pixels of the segmenter's image, pixels
+    its segment kept: ``ObjectSegmenter.eval_pixels``) and ``pixels``, that
+    frame's image and masks downscaled to at most :data:`FRAME_WIDTH_PX`
+    wide (what a demonstration's three stored frames are chosen from).
+
     The grid is anchored at a frame time (or, without frames, at the current
     time). Drake handles a discrete update due at time t at the start of the
     step *after* t, so at a frame instant the recorder advances to the event's
@@ -183,6 +193,7 @@ class StationRecorder:
                 raise ValueError(f"camera.fps = {fps} Hz: recording perception needs the camera "
                                  f"at frame_hz = {frame_hz} Hz")
             self._seg_context = segmenter.GetMyContextFromRoot(root_context)
+            self._frame_stride = max(1, math.ceil(segmenter.config.image_width / FRAME_WIDTH_PX))
         # The same float the camera's periodic events use, so k * period is
         # exactly their event time.
         self._frame_period = None if frame_hz is None else 1.0 / self.frame_hz
@@ -196,6 +207,7 @@ class StationRecorder:
         self.times, self.X_WE, self.q, self.obj, self.grip, self.force = [], [], [], [], [], []
         self.torque = []
         self.points, self.valid = [], []
+        self.frame_force, self.pixel_counts, self.pixels = [], [], []
         self.X_WO_perceived, self.X_WO_frame = None, None
         self._t0 = None
         self._last_peak = 0.0
@@ -262,6 +274,8 @@ class StationRecorder:
         self.grip.append(float(gripper_command))
         self.force.append(float(self._last_peak))
         self.torque.append(self._last_torque_peak)
+        if at_frame:
+            self.frame_force.append(max(self.force[max(0, i - self.k + 1):]))
         self._n += 1
 
     def _perceive(self, frame_index: int) -> None:
@@ -273,6 +287,9 @@ class StationRecorder:
             self.X_WO_frame = frame_index
         self.points.append(points)
         self.valid.append(valid)
+        pixels = seg.eval_pixels(ctx)
+        self.pixel_counts.append(pixels.counts())
+        self.pixels.append(pixels.downscaled(self._frame_stride))
 
     def record(self, n: int) -> None:
         """Samples n + 1 instants from the anchor (n periods)."""
