@@ -380,7 +380,10 @@ class RayPool(_Pool):
     starts a local Ray with ``ray.init()`` (and shuts it down on close).
     ``num_cpus`` per actor: 1. The skill goes to the actors through Ray's
     object store and the results come back as the tasks' returns: nothing
-    on disk is shared.
+    on disk is shared. On a cluster, at most one actor per free CPU
+    (``n_workers`` is the count made): an actor holds its CPU for its life,
+    so one more would wait for a CPU that never frees, and the rollouts given
+    to it with it (a hang); the results do not depend on the count.
     """
 
     def __init__(self, spec: RunnerSpec, n_workers: int, address: str | None = None):
@@ -393,7 +396,8 @@ class RayPool(_Pool):
             raise ValueError(f"workers: expected >= 1, got {n_workers}")
         self._ray = ray
         self._owns_ray = connect_ray(address, n_workers, log_to_driver=False) and not address
-        self.n_workers = int(n_workers)
+        free = int(ray.available_resources().get("CPU", 0)) if address else int(n_workers)
+        self.n_workers = max(1, min(int(n_workers), free))
         from drake_skill.fileio import pack_folder
 
         actor = ray.remote(num_cpus=1)(_RayWorkerImpl)
