@@ -12,15 +12,17 @@ prints the goal model's summary, and writes SKILL_DIR:
                         initial (blue) and terminal (green) states, a cloud per state
     demo_returns.png    the dense return of each demonstration against time
     fit_report.html     per demonstration, on one page opened by any browser: what the
-                        segment kept of the object over time (the scene posed again on
-                        the simulated station), three frames with the segment drawn
-                        over them, the goal features and the goal model's state over
-                        time, the imitation's distance from the demonstration [mm] and
-                        the peak contact force (drake_skill.workflow.fit_report)
+                        segment kept of the object over time (a schema-2 file's stored
+                        counts; for schema 1, the scene posed again on the simulated
+                        station), three frames with the segment drawn over them, the
+                        goal features and the goal model's state over time, the
+                        imitation's distance from the demonstration [mm] and the peak
+                        contact force (drake_skill.workflow.fit_report)
 
 A stretch of half a second or more in which the segment keeps less than half
-of the object's visible pixels is a warning line naming the demonstration,
-the time and the fix (the colour range, or the clustering).
+of the object's object-coloured pixels (schema 2) or visible pixels (schema 1,
+re-posed) is a warning line naming the demonstration, the time and the fix
+(the colour range, or the clustering).
 """
 
 from __future__ import annotations

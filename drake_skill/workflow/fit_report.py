@@ -4,7 +4,17 @@
 (images inline, opened by a browser with no server) and one terminal line per
 finding (``warning: DEMO: what, when; how to fix``). Per demonstration:
 
-- **the segment over time.** The scene of the recording is posed again on the
+- **the segment over time.** A demonstration file of schema 2 stores it
+  (``drake_skill.demos.format``): per 10 Hz frame the object-coloured pixels
+  of the camera image and those the segment kept, and three small frames
+  (start, first contact, end) with the segment; the kept fraction is then
+  kept / object-coloured (no ground truth is needed, so a demonstration
+  recorded on the robot gets the panel too), and a stretch under
+  :data:`KEPT_WARN` means the segment drops object-coloured pixels (the crop,
+  the table removal or the cluster rule). The object's pixels that fail the
+  colour test are in neither count (without ground truth nothing tells them
+  from the background): the stored frames show them, unmarked.
+  For a schema-1 file the scene of the recording is posed again on the
   scenario's simulated station from the demonstration's own record (arm
   joints, fingers, the object's true pose and joint, every ``every_s``
   seconds), the object camera rendered and segmented with the station's
@@ -25,9 +35,9 @@ finding (``warning: DEMO: what, when; how to fix``). Per demonstration:
   after refinement (``skill.info["dmp_refinement"]``);
 - the peak filtered contact force and when (the recorder's, ``demos/force_margin``).
 
-The re-posed scene is the simulation's: a demonstration recorded on the robot
-(``metadata["source"] == "robot"``) is reported without the segment panel.
-Demonstrations that store no perception have no goal panel.
+The re-posed scene is the simulation's: a schema-1 demonstration recorded on the
+robot (``metadata["source"]`` "kinesthetic") is reported without the segment
+panel. Demonstrations that store no perception have no goal panel.
 """
 
 from __future__ import annotations
@@ -40,28 +50,37 @@ import numpy as np
 
 from drake_skill.fileio import atomic_write_text, png_data_url
 
-__all__ = ["KEPT_WARN", "MIN_WARN_S", "SegmentTrack", "segment_tracks", "segment_warnings", "track_segment",
-           "write_fit_report"]
+__all__ = ["COLOURED", "KEPT_WARN", "MIN_WARN_S", "VISIBLE", "SegmentTrack", "segment_tracks", "segment_warnings",
+           "stored_track", "track_segment", "write_fit_report"]
 
-#: A stretch of frames keeping less than this fraction of the object's visible pixels is warned about.
+#: A stretch of frames keeping less than this fraction of the object's (visible or object-coloured) pixels is
+#: warned about ...
 KEPT_WARN = 0.5
 #: ... when it lasts at least this long [s].
 MIN_WARN_S = 0.5
 #: Object pixels that fail the colour test: above this share of the lost ones, the fix is the colour range.
 COLOUR_CAUSE = 0.5
+#: What a track's kept fraction is of: a re-posed scene's object pixels (the renderer's labels) ...
+VISIBLE = "the object's visible pixels"
+#: ... or a schema-2 file's stored object-coloured pixels.
+COLOURED = "the object-coloured pixels"
+#: metadata["source"] of a demonstration recorded on the robot (drake-skill hardware record-demo).
+ROBOT_SOURCES = ("kinesthetic", "robot")
 
 
 @dc.dataclass
 class SegmentTrack:
-    """One demonstration's segment over time: times (N,) [s]; per frame the object's visible pixels,
-    those of them that pass the colour test, those the segment keeps; ``snapshots``: (what, t [s],
-    (h, w, 3) uint8 image with the segment drawn over it)."""
+    """One demonstration's segment over time: times (N,) [s]; per frame the pixels the kept fraction is
+    of (``visible``: :data:`VISIBLE` of a re-posed scene, or :data:`COLOURED` stored in the file, as
+    ``of`` says), those of them that pass the colour test, those the segment keeps; ``snapshots``:
+    (what, t [s], (h, w, 3) uint8 image with the segment drawn over it)."""
 
     times: np.ndarray
     visible: np.ndarray
     coloured: np.ndarray
     kept: np.ndarray
     snapshots: list = dc.field(default_factory=list)
+    of: str = VISIBLE
 
     @property
     def kept_fraction(self) -> np.ndarray:
@@ -115,10 +134,11 @@ class _Poser:
 
 def _snapshot_times(demo) -> list[tuple[str, float]]:
     """Start, the first time the object's joint moved 2 % of its travel over the demonstration, end."""
-    t, s = demo.times_100hz - demo.times_100hz[0], np.asarray(demo.object_state_100hz, dtype=float)
-    travel = float(np.max(np.abs(s - s[0])))
-    moved = np.flatnonzero(np.abs(s - s[0]) > 0.02 * travel) if travel > 0 else np.zeros(0, int)
-    first = float(t[moved[0]]) if moved.size else float(t[len(t) // 2])
+    from drake_skill.demos.format import first_move
+
+    t = demo.times_100hz - demo.times_100hz[0]
+    moved = first_move(demo.object_state_100hz)
+    first = float(t[moved if moved is not None else len(t) // 2])
     return [("start", 0.0), ("object first moves", first), ("end", float(t[-1]))]
 
 
@@ -140,6 +160,19 @@ def track_segment(station, demo, every_s: float = 0.5) -> SegmentTrack:
         snapshots.append((what, t, _overlay(*poser.frame())))
     visible, coloured, kept = (np.array(c, dtype=int) for c in zip(*counts))
     return SegmentTrack(times, visible, coloured, kept, snapshots)
+
+
+def stored_track(demo) -> SegmentTrack:
+    """The segment of a schema-2 demonstration (``demo.has_segment``) from its stored counts and frames:
+    no simulation, so a robot's demonstration too. The kept fraction is of :data:`COLOURED`; the frames
+    show kept pixels green and object-coloured but dropped ones red."""
+    t = demo.times - demo.times[0]
+    coloured, kept = demo.pixels_coloured.astype(int), demo.pixels_kept.astype(int)
+    labels = demo.metadata.get("snapshot_labels", ["start", "first contact", "end"])
+    snapshots = [(what, float(t[k]), _overlay(rgb, segment > 0, segment > 0, segment == 2))
+                 for what, k, rgb, segment in zip(labels, demo.snapshot_index, demo.snapshot_rgb,
+                                                  demo.snapshot_segment)]
+    return SegmentTrack(t, coloured, coloured, kept, snapshots, of=COLOURED)
 
 
 def segment_warnings(name: str, track: SegmentTrack) -> list[str]:
@@ -171,61 +204,99 @@ def _warning(name: str, track: SegmentTrack, k: int, end: int) -> str:
         fix = ("the lost pixels pass the colour test and the segment drops them: keep every region "
                "(object.colour.cluster_rule: all_regions) or move the camera")
     until = "the end" if end == len(track.times) - 1 else f"t = {track.times[end]:.1f} s"
-    return (f"{name}, from t = {track.times[k]:.1f} s to {until}: the segment keeps {kept * 100:.0f} % of the "
-            f"object's visible pixels; {fix}")
+    return (f"{name}, from t = {track.times[k]:.1f} s to {until}: the segment keeps {kept * 100:.0f} % of "
+            f"{track.of}; {fix}")
 
 
 def segment_tracks(skill, demos, station_config=None) -> tuple[dict, list[str]]:
-    """(name -> :class:`SegmentTrack` of each simulated demonstration, the warning lines) on the scenario
-    ``station_config`` (default the skill's); none where the scenario has no camera."""
-    from drake_skill.station.sim.builder import build_station
-
-    config = station_config if station_config is not None else skill.station_config()
-    if not config.enable_camera:
-        return {}, []
-    station = build_station(config)
-    tracks, warnings = {}, []
+    """(name -> :class:`SegmentTrack` of each demonstration that has one, the warning lines): a schema-2
+    file's stored one (:func:`stored_track`), else, for a simulated demonstration, its scene re-posed
+    on the scenario ``station_config`` (default the skill's; none where the scenario has no camera)."""
+    tracks, warnings, repose = {}, [], _Reposer(skill, station_config)
     for i, demo in enumerate(demos):
-        if demo.metadata.get("source") == "robot":
-            continue
         name = _demo_name(demo, i)
-        tracks[name] = track_segment(station, demo)
-        warnings += segment_warnings(name, tracks[name])
+        track = stored_track(demo) if demo.has_segment else repose(demo)
+        if track is not None:
+            tracks[name] = track
+            warnings += segment_warnings(name, track)
     return tracks, warnings
+
+
+class _Reposer:
+    """:func:`track_segment` of a schema-1 simulated demonstration (None for a robot's or without the
+    camera), the station built at the first one."""
+
+    def __init__(self, skill, station_config=None):
+        self.skill, self.config, self.station = skill, station_config, None
+
+    def __call__(self, demo) -> SegmentTrack | None:
+        from drake_skill.station.sim.builder import build_station
+
+        if demo.metadata.get("source") in ROBOT_SOURCES:
+            return None
+        if self.config is None:
+            self.config = self.skill.station_config()
+        if not self.config.enable_camera:
+            return None
+        if self.station is None:
+            self.station = build_station(self.config)
+        return track_segment(self.station, demo)
 
 
 # ----------------------------------------------------------------------------- the page
 def _demo_figure(skill, demo, track: SegmentTrack | None) -> str:
-    """The kept fraction, the goal features and the goal model's state over time, as one PNG."""
+    """The kept fraction, the peak contact force (schema 2), the goal features and the goal model's state
+    over time, as one PNG."""
     from drake_skill.fileio import new_figure
 
-    rows = (track is not None) + 2 * (demo.object_points is not None)
-    if rows == 0:
-        return ""
-    fig = new_figure((8, 2.2 * rows))
-    axes = [fig.add_subplot(rows, 1, i + 1) for i in range(rows)]
-    i = 0
-    if track is not None:
-        ax = axes[i]
-        i += 1
-        ax.plot(track.times, track.kept_fraction, label="kept / visible")
-        ax.plot(track.times, track.coloured / np.maximum(track.visible, 1), "--", label="object-coloured / visible")
-        ax.axhline(KEPT_WARN, color="red", lw=0.8, ls=":", label="warning below")
-        ax.set_ylim(-0.05, 1.05)
-        ax.set_ylabel("object pixels")
-        ax.legend(loc="lower left", fontsize=7)
+    panels = ([lambda ax: _segment_panel(ax, track)] if track is not None else []) \
+        + ([lambda ax: _force_panel(ax, demo)] if demo.peak_force is not None else [])
     if demo.object_points is not None:
-        G = skill.goal_data(demo.object_points, demo.perception_valid, X_WO=demo.X_WO_start)
-        t = demo.times - demo.times[0]
-        axes[i].plot(t[:len(G)], G)
-        axes[i].set_ylabel("goal features G")
-        _, smoothed, _ = skill.pomrp.posteriors(G)
-        axes[i + 1].step(t[:len(G)], np.argmax(smoothed, axis=1), where="post")
-        axes[i + 1].set_ylabel("goal model state")
-        axes[i + 1].set_yticks(range(smoothed.shape[1]))
-    axes[-1].set_xlabel("time from the demonstration's start [s]")
+        panels += _goal_panels(skill, demo)
+    if not panels:
+        return ""
+    fig = new_figure((8, 2.2 * len(panels)))
+    for i, draw in enumerate(panels):
+        draw(fig.add_subplot(len(panels), 1, i + 1))
+    fig.axes[-1].set_xlabel("time from the demonstration's start [s]")
     fig.tight_layout()
     return f'<img alt="over time" src="{png_data_url(fig=fig)}">'
+
+
+def _segment_panel(ax, track: SegmentTrack) -> None:
+    if track.of == COLOURED:
+        ax.plot(track.times, track.kept_fraction, label="kept / object-coloured")
+        ax.plot(track.times, track.coloured / max(track.coloured.max(), 1), "--", label="object-coloured / their most")
+    else:
+        ax.plot(track.times, track.kept_fraction, label="kept / visible")
+        ax.plot(track.times, track.coloured / np.maximum(track.visible, 1), "--", label="object-coloured / visible")
+    ax.axhline(KEPT_WARN, color="red", lw=0.8, ls=":", label="warning below")
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_ylabel("object pixels")
+    ax.legend(loc="lower left", fontsize=7)
+
+
+def _goal_panels(skill, demo) -> list:
+    """Drawers of the goal features G and of the goal model's most likely state over time."""
+    G = skill.goal_data(demo.object_points, demo.perception_valid, X_WO=demo.X_WO_start)
+    t = (demo.times - demo.times[0])[:len(G)]
+    smoothed = skill.pomrp.posteriors(G)[1]
+
+    def features(ax) -> None:
+        ax.plot(t, G)
+        ax.set_ylabel("goal features G")
+
+    def states(ax) -> None:
+        ax.step(t, np.argmax(smoothed, axis=1), where="post")
+        ax.set_ylabel("goal model state")
+        ax.set_yticks(range(smoothed.shape[1]))
+
+    return [features, states]
+
+
+def _force_panel(ax, demo) -> None:
+    ax.step(demo.times - demo.times[0], demo.peak_force, where="pre")
+    ax.set_ylabel("peak contact\nforce [N]")
 
 
 def _facts(demo, refinement: dict | None) -> str:
@@ -247,11 +318,13 @@ def _snapshots(track: SegmentTrack) -> str:
 
 
 _STYLE = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}figure{display:inline-block;
-margin:.4em;font-size:.85em;vertical-align:top}figure img{width:300px;border:1px solid #999}.warn{color:#a00}"""
+margin:.4em;font-size:.85em;vertical-align:top}figure img{width:300px;border:1px solid #999;
+image-rendering:pixelated}.warn{color:#a00}"""
 
 _LEGEND = ("Segment drawn over the object camera's crop: <span style='color:#0a0'>kept</span>, "
            "<span style='color:#d00'>object-coloured but dropped</span>, "
-           "<span style='color:#05f'>object but not object-coloured</span>.")
+           "<span style='color:#05f'>object but not object-coloured</span> (a scene re-posed in simulation, "
+           "for a demonstration file of schema 1; a schema-2 file's stored frames have no ground truth).")
 
 
 def write_fit_report(path, skill, demos, tracks: dict, warnings: list[str]) -> Path:
@@ -266,7 +339,7 @@ def write_fit_report(path, skill, demos, tracks: dict, warnings: list[str]) -> P
         track = tracks.get(name)
         body += [f"<h2>{html.escape(name)}</h2>", _facts(demo, refinement[i] if i < len(refinement) else None),
                  _snapshots(track) if track is not None else "<p>(no segment panel: "
-                 "a robot's demonstration, or a scenario without the camera)</p>",
+                 "recorded without the camera, a schema-1 robot demonstration or a scenario without the camera)</p>",
                  _demo_figure(skill, demo, track)]
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>fit of {html.escape(skill.name)}</title>"
             f"<style>{_STYLE}</style></head><body>{''.join(body)}</body></html>\n")
