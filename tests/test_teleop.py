@@ -156,16 +156,17 @@ def test_meshcat_driven_demonstration_is_recorded():
     assert meshcat.GetSliderValue(SLIDER["x"]) == pytest.approx(start["x"], abs=0.005)
 
 
-def test_idle_session_runs_60_s_without_a_solver_failure():
+def test_idle_session_runs_20_s_without_a_solver_failure():
     """Left idle (no browser input, gripper commanded closed), the session waits the
-    whole max_wait of 60 s: the SAP failure at rest (issue 10, t = 2.668 s) is gone."""
+    whole max_wait of 20 s (7x the time of the failure): the SAP failure at rest (issue 10,
+    t = 2.668 s) is gone. (It waited 60 s until the suite's time had to be cut.)"""
     meshcat = Meshcat()
-    config = TeleopConfig(realtime_rate=0.0, record_perception=False, max_wait=60.0)
+    config = TeleopConfig(realtime_rate=0.0, record_perception=False, max_wait=20.0)
     session = TeleopSession("open", meshcat, config)
     assert session.station.config.gripper_home == 0.0
-    with pytest.raises(TimeoutError, match="not pressed within 60.0 s"):
+    with pytest.raises(TimeoutError, match="not pressed within 20.0 s"):
         session.record(seed=0, status=lambda *_: None)
-    assert session.context.get_time() > 60.0
+    assert session.context.get_time() > 20.0
     assert session.mode() == IDLE
 
 
