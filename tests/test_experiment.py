@@ -1,4 +1,5 @@
-"""``drake-skill experiment``: a tiny grid end to end on worker processes, resuming, retries, the report.
+"""``drake-skill experiment``: a tiny grid end to end on worker processes, resuming, retries, the report,
+and on a Ray cluster of 3 nodes (a head and 2 workers) in a network namespace of its own.
 
 The grid: the shared small Close skill (learning_support), PI^2-ES-Cov and
 PoWER with the dense reward, 2 runs each, 1 episode of 2 rollouts (PoWER: 2
@@ -9,18 +10,21 @@ import importlib.util
 import json
 import os
 import shutil
+import signal
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from drake_skill.cli.main import main
-from drake_skill.experiments.grid import GridConfig, plan_tasks, run_dir, run_grid
+from drake_skill.experiments.grid import GridConfig, before_path, plan_tasks, run_dir, run_grid
 from drake_skill.experiments.pool import MAX_ATTEMPTS, run_on_processes
 from drake_skill.experiments.report import write_report
 from drake_skill.experiments.table import COLUMNS, read_table, table_text
 
 from learning_support import rollout_config, shared_skill
+from ray_cluster_support import netns_unavailable, start_cluster
 
 RAY = importlib.util.find_spec("ray") is not None
 CONFIG = dict(skills=("close",), methods=("pi2-es-cov", "power"), rewards=("dense",), runs=2, episodes=1,
@@ -198,21 +202,6 @@ def test_report_cli_and_bad_input_name_the_flag(grid, tmp_path, capsys):
     assert tuple(read_table(tmp_path / "table.csv")[0]) == COLUMNS
 
 
-@pytest.mark.skipif(not RAY, reason="ray is not installed (pip install ray)")
-def test_the_grid_on_local_ray_gives_the_process_pool_numbers(grid, tmp_path):
-    shared, out, _ = grid
-    outcome = _grid(shared, tmp_path / "ray", use_ray=True)
-    assert outcome.failed == [] and outcome.ran == 4
-    assert (tmp_path / "ray" / "table.csv").read_bytes() == (out / "table.csv").read_bytes()
-    # The runs came back through Ray and the driver stored them: the same folders, and the same
-    # config.json (naming the driver's skill folder, not the worker's copy).
-    for method in ("power", "pi2-es-cov"):
-        pool_run, ray_run = (run_dir(o, "close", method, "dense", 1) for o in (out, tmp_path / "ray"))
-        assert sorted(p.name for p in ray_run.iterdir()) == sorted(p.name for p in pool_run.iterdir())
-        assert json.loads((ray_run / "config.json").read_text())["skill_dir"] == \
-            str((tmp_path / "ray" / "close" / "initial_skill").resolve())
-
-
 def test_a_ray_task_needs_nothing_under_out_and_only_the_driver_writes_there(grid, tmp_path):
     """Issue 48 item 1: what a Ray worker runs (execute_remote) reads and writes nothing under --out
     (here moved away while it runs), and the driver's store gives the process pool's file."""
@@ -285,3 +274,201 @@ def test_an_unreachable_ray_address_is_one_line_within_seconds(tmp_path, capsys)
         assert f"argument --ray-address: 127.0.0.1:{port}: nothing answers there within 5 s" in err
         assert err.count("\n") == 1
     assert not (tmp_path / "out").exists()
+
+
+# ----------------------------------------------------------------------- on a Ray cluster
+def _cluster_unavailable() -> str | None:
+    return "ray is not installed (pip install ray)" if not RAY else netns_unavailable()
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _cluster_started(request, tmp_path_factory):
+    """The cluster, started with the module (it comes up while the process pool's grid runs) when a
+    selected test uses it, and shut down after the module; None when not."""
+    module = [item for item in request.session.items if item.module is request.module]
+    if not any("cluster" in item.fixturenames for item in module) or _cluster_unavailable():
+        yield None
+        return
+    started = start_cluster(tmp_path_factory.mktemp("ray_cluster"))
+    yield started
+    started.close()
+
+
+@pytest.fixture(scope="module")
+def cluster(_cluster_started):
+    """A Ray cluster of a head with no CPU and 2 worker nodes of 1 CPU each, on this machine, in a
+    network namespace whose only interface is loopback (tests/ray_cluster_support.py)."""
+    reason = _cluster_unavailable()
+    if reason:
+        pytest.skip(reason)
+    return _cluster_started
+
+
+#: The runs of the tiny grid.
+RUNS = CONFIG["runs"] * len(CONFIG["methods"])
+
+
+def _grid_argv(shared, out, address, runs=CONFIG["runs"]) -> list:
+    """``drake-skill experiment run`` of the tiny grid (CONFIG, the process pool's) on the cluster."""
+    c = CONFIG
+    return ["experiment", "run", "--skills", *c["skills"], "--methods", *c["methods"], "--rewards", *c["rewards"],
+            "--runs", runs, "--episodes", c["episodes"], "--rollouts", c["rollouts"], "--held-out", c["held_out"],
+            "--skill-dir", shared["skill_dir"], "--station-config", shared["station_yaml"],
+            "--ray-address", address, "--out", out, "--quiet"]
+
+
+def _until(condition, what: str, running=lambda: True, timeout: float = 300.0):
+    """Waits for ``condition()`` while ``running()`` holds (the driver has not ended)."""
+    end = time.monotonic() + timeout
+    while not condition():
+        assert running(), f"the driver ended before {what}"
+        assert time.monotonic() < end, f"not within {timeout:g} s: {what}"
+        time.sleep(0.1)
+
+
+def _stored(out) -> list[str]:
+    return sorted(str(p.parent.relative_to(out)) for p in Path(out).glob("close/*/dense/run_*/summary.json"))
+
+
+def _finished(stdout: str) -> str:
+    """"N run(s) finished, M stored" of ``experiment run``'s summary line (Ray prints its own lines
+    there too: a task it retries)."""
+    (line,) = [line for line in stdout.splitlines() if " run(s) finished in " in line]
+    ran, rest = line.split(" run(s) finished in ", 1)
+    return f"{ran} run(s) finished, {rest.split('; ')[1].split(' stored in ')[0]} stored"
+
+
+def _task_folders(node: Path) -> set[str]:
+    """The temporary folders of the grid's tasks on a worker node (``remote.execute_remote``'s: one
+    left there is a task whose process was killed)."""
+    return {p.name for p in node.glob("drake_skill_task_*")}
+
+
+@pytest.fixture(scope="module")
+def cluster_grid(grid, cluster):
+    """The tiny grid run by ``drake-skill experiment run --ray-address`` on the cluster, through two faults.
+
+    The first driver is killed with SIGKILL as soon as the grid has stored its first unit (the held-out
+    record before learning; a run is under way on the other node). When its tasks have ended (Ray ends
+    a dead driver's tasks), the same command is started again and resumes; while it runs, worker node 0
+    is removed as a run starts on it (the run's task folder appears in the node's TMPDIR), and a new
+    node is added in its place."""
+    shared, _, _ = grid
+    out = cluster.folder / "grid"
+    argv = _grid_argv(shared, out, cluster.address)
+    record = before_path(out, "close")
+    tasks = lambda: cluster.call(op="running", name="execute_remote")["pids"]  # noqa: E731
+    first = cluster.spawn(argv, "first")
+    _until(record.is_file, "the held-out record is stored", lambda: cluster.wait(first, 0) is None)
+    under_way = tasks()
+    os.kill(first, signal.SIGKILL)
+    killed = {"rc": cluster.wait(first, 60), "runs": _stored(out), "record": record.stat().st_mtime_ns,
+              "under_way": under_way}
+    _until(lambda: not tasks(), "the killed driver's tasks end", timeout=60)
+    node = cluster.folder / "node_0"
+    earlier = _task_folders(node)
+    second = cluster.spawn(argv, "second")
+    _until(lambda: _task_folders(node) - earlier, "a run starts on node 0", lambda: cluster.wait(second, 0) is None)
+    removed = {"runs": _stored(out), "folders": _task_folders(node) - earlier}
+    assert cluster.call(op="remove_node")["tmpdir"] == str(node)
+    cluster.call(op="add_node")
+    rc = cluster.wait(second, 400)
+    stdout, stderr = cluster.output("second")
+    return {"out": out, "killed": killed, "removed": removed, "rc": rc, "stdout": stdout, "stderr": stderr,
+            "left": _task_folders(node)}
+
+
+def test_a_grid_on_a_ray_cluster_gives_the_process_pool_table(grid, cluster_grid):
+    """Issue 48: ``experiment run --ray-address`` on a cluster of 2 worker nodes (here through the faults
+    of the next two tests) writes the process pool's table byte for byte and the same run folders; each
+    run's config.json names the driver's skill folder, not the worker's copy."""
+    _, out, _ = grid
+    ray_out = cluster_grid["out"]
+    assert cluster_grid["rc"] == 0, cluster_grid["stdout"] + cluster_grid["stderr"][-3000:]
+    assert (ray_out / "table.csv").read_bytes() == (out / "table.csv").read_bytes()
+    for method in CONFIG["methods"]:
+        for run in range(CONFIG["runs"]):
+            pool_run, ray_run = (run_dir(o, "close", method, "dense", run) for o in (out, ray_out))
+            assert sorted(p.name for p in ray_run.iterdir()) == sorted(p.name for p in pool_run.iterdir())
+            assert json.loads((ray_run / "config.json").read_text())["skill_dir"] == \
+                str((ray_out / "close" / "initial_skill").resolve())
+    assert not list(ray_out.glob("**/.*.partial"))
+
+
+def test_the_driver_killed_mid_grid_resumes_to_the_same_table(cluster_grid):
+    """The held-out record the killed driver stored is kept (not measured again), the runs it had under
+    way are run by the second driver, once each; the table is the pool's (the test above)."""
+    killed = cluster_grid["killed"]
+    assert killed["rc"] == -signal.SIGKILL and killed["under_way"]
+    assert before_path(cluster_grid["out"], "close").stat().st_mtime_ns == killed["record"]
+    todo = RUNS - len(killed["runs"])
+    assert todo > 0 and _finished(cluster_grid["stdout"]) == f"{todo} run(s) finished, {RUNS} stored"
+    assert "not finished" not in cluster_grid["stdout"]
+
+
+def test_a_worker_node_lost_mid_grid_loses_no_run_and_runs_none_twice(cluster_grid):
+    """Worker node 0 went while a run was on it (its task folder is left there, never finished) and
+    runs were still to be stored; every run is stored once (the second driver's count of finished runs
+    is the runs it had to do, not more: Ray retried the lost task, and only that) and the table has
+    each row once."""
+    removed, killed = cluster_grid["removed"], cluster_grid["killed"]
+    assert removed["folders"] and removed["folders"] <= cluster_grid["left"]
+    assert len(removed["runs"]) < RUNS
+    todo = RUNS - len(killed["runs"])
+    assert _finished(cluster_grid["stdout"]) == f"{todo} run(s) finished, {RUNS} stored"
+    rows = read_table(cluster_grid["out"] / "table.csv")
+    assert len(set(_keys(rows))) == len(rows) == 2 * RUNS          # a greedy point before and after
+    assert _stored(cluster_grid["out"]) == [f"close/{m}/dense/run_{r:03d}" for m in sorted(CONFIG["methods"])
+                                            for r in range(CONFIG["runs"])]
+
+
+def test_learn_on_a_ray_cluster_gives_the_serial_curve(grid, cluster):
+    """``learn --ray-address`` with the settings of the grid's run 0 of PI^2-ES-Cov (learn() serially in
+    one worker: test_a_grid_run_is_the_learn_run_of_its_settings) gives its curve and its search state.
+    ``--workers 3`` on the cluster's 2 CPUs makes 2 actors (a third waited for a CPU forever)."""
+    shared, out, _ = grid
+    config = GridConfig(**CONFIG).learn_config("pi2-es-cov", "dense", 0)
+    learned = cluster.folder / "learn"
+    argv = ["learn", "--skill-dir", shared["skill_dir"], "--station-config", shared["station_yaml"],
+            "--method", config.method, "--reward", config.reward, "--episodes", config.episodes,
+            "--rollouts", config.rollouts, "--seed", config.seed, "--held-out", config.held_out,
+            "--select", config.select, "--workers", 3, "--no-replay", "--quiet",
+            "--ray-address", cluster.address, "--out", learned]
+    assert cluster.wait(cluster.spawn(argv, "learn"), 300) == 0, cluster.output("learn")
+    serial_run = run_dir(out, "close", "pi2-es-cov", "dense", 0)
+    on_ray, serial = (json.loads((d / "summary.json").read_text()) for d in (learned, serial_run))
+    assert (on_ray["workers"], serial["workers"]) == (2, 1)
+    assert on_ray["curve"] == serial["curve"] and len(serial["curve"]) == 2
+    with np.load(learned / "checkpoint" / "search.npz") as a, np.load(serial_run / "checkpoint" / "search.npz") as b:
+        assert sorted(a.files) == sorted(b.files)
+        for key in a.files:
+            np.testing.assert_array_equal(a[key], b[key])
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_a_cluster_with_no_free_cpu_is_one_line_within_seconds(grid, cluster, tmp_path):
+    """Issue 48's bad input: with every CPU of the cluster reserved, ``experiment run --ray-address`` with
+    runs to do (--runs 3 over a stored grid) ends with one line, in seconds, and the stored grid is as it
+    was (connect_ray's refusal)."""
+    shared, out, _ = grid
+    stored = tmp_path / "grid"
+    shutil.copytree(out, stored)
+    files = _files(stored)
+    assert cluster.call(op="occupy")["held"] == 2
+    try:
+        start = time.monotonic()
+        code = cluster.wait(cluster.spawn(_grid_argv(shared, stored, cluster.address, runs=3), "busy"), 120)
+        wall = time.monotonic() - start
+    finally:
+        cluster.call(op="release")
+    stdout, stderr = cluster.output("busy")
+    assert code == 2, stdout + stderr
+    line = (f"drake-skill: error: --ray-address {cluster.address}: the cluster has no free CPU (2 in all, 0 free); "
+            "free some, add a node, or leave --ray-address out to run here")
+    # (Before it, Ray's own log lines of the connection.)
+    assert stderr.endswith(f"\n{line}\n") and stderr.count("drake-skill") == 1 and "Traceback" not in stderr
+    assert wall < 60
+    assert _files(stored) == files
