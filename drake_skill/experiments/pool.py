@@ -10,7 +10,7 @@ tasks, so a worker builds its station once per skill
   a time, so a worker that dies is known to have died in its task: the task
   is given to a new worker, up to ``max_attempts`` times in all.
 - :func:`run_on_ray`: Ray tasks of one CPU each, on a local ``ray.init()``
-  or a cluster (``address``); Ray retries a task whose worker died
+  or a cluster (``address``); Ray retries a task whose worker or node died
   (``max_retries``).
 
 An exception raised by ``fn`` is not retried (the same inputs would raise it
@@ -164,8 +164,11 @@ def run_on_ray(tasks: Sequence, fn: Callable, workers: int, on_done: OnDone, add
     ``address``: an existing cluster ("auto", "ray://host:port"; nothing on
     disk is shared: ``shared`` goes to every task through Ray's object store,
     put once), or None for a local ``ray.init`` with ``workers`` CPUs (shut
-    down at the end). A task whose worker died is retried by Ray,
-    ``max_attempts - 1`` times.
+    down at the end). A task whose worker died, or whose node went (preempted,
+    crashed, removed), is retried by Ray, ``max_attempts - 1`` times, and a
+    finished task's result lost with its node is made again (Ray's lineage
+    reconstruction); ``on_done`` is called once per task either way (tests:
+    a worker node removed mid-grid, tests/test_experiment.py).
     """
     from drake_skill.learning.workers import _WORKER_ENV, connect_ray
 
