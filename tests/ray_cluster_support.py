@@ -206,8 +206,10 @@ class _Cluster:
         return {"tmpdir": str(tmp)}
 
     def remove_node(self) -> dict:
+        """The oldest worker node's processes killed at once (as a node that crashes or is
+        preempted; ``allow_graceful`` would let them end their work first)."""
         node, tmp = self.nodes.pop(0)
-        self.cluster.remove_node(node)
+        self.cluster.remove_node(node, allow_graceful=False)
         return {"tmpdir": str(tmp)}
 
     def spawn(self, argv: list[str], log: str) -> dict:
