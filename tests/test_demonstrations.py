@@ -58,14 +58,14 @@ def _schema2(seed: int, m: int, perception: bool) -> dict:
     fields = dict(peak_force=np.where(np.arange(m) >= 5, rng.uniform(0.6, 3.0, m), 0.0))
     if perception:
         coloured = rng.integers(5000, 6000, m)
-        fields.update(pixels_coloured=coloured, pixels_kept=coloured - rng.integers(0, 100, m),
-                      snapshot_index=np.array([0, 5, m - 1]),
+        fields.update(pixels_hue=coloured + rng.integers(0, 20, m), pixels_coloured=coloured,
+                      pixels_kept=coloured - rng.integers(0, 100, m), snapshot_index=np.array([0, 5, m - 1]),
                       snapshot_rgb=rng.integers(0, 256, (3, 6, 8, 3), dtype=np.uint8),
-                      snapshot_segment=rng.integers(0, 3, (3, 6, 8), dtype=np.uint8))
+                      snapshot_segment=rng.integers(0, 4, (3, 6, 8), dtype=np.uint8))
     return fields
 
 
-SCHEMA2_FIELDS = ("peak_force", "pixels_coloured", "pixels_kept", "snapshot_index", "snapshot_rgb",
+SCHEMA2_FIELDS = ("peak_force", "pixels_hue", "pixels_coloured", "pixels_kept", "snapshot_index", "snapshot_rgb",
                   "snapshot_segment")
 
 
@@ -202,7 +202,8 @@ def test_schema_2_fields_round_trip_and_mean_what_they_say(tmp_path):
     demo = make_demo()
     back = load_demonstration(save_demonstration(demo, tmp_path / "demo_000.npz"))
     assert back.has_segment and back.snapshot_index.tolist() == [0, 5, 12] and back.snapshot_rgb.shape == (3, 6, 8, 3)
-    assert np.all(back.pixels_kept <= back.pixels_coloured) and np.all(back.peak_force >= 0)
+    assert np.all(back.pixels_kept <= back.pixels_coloured) and np.all(back.pixels_coloured <= back.pixels_hue)
+    assert np.all(back.peak_force >= 0)
     assert back.peak_force.dtype == np.float64 and back.pixels_kept.dtype == np.int64
     no_camera = make_demo(perception=False)
     assert no_camera.peak_force.shape == (13,) and not no_camera.has_segment
@@ -636,15 +637,18 @@ def _set_item(field, index, value):
     # schema 2
     (_set_item("peak_force", 3, -0.5), r"field 'peak_force' has a negative force at sample 3$"),
     (_set(peak_force=np.zeros(12)), r"field 'peak_force' has shape \(12,\); expected \(13,\)"),
-    (_set(snapshot_rgb=None), r"field 'snapshot_rgb' is missing while pixels_coloured, pixels_kept, snapshot_index, "
-                              r"snapshot_segment is present; the segment's counts and pictures come together$"),
+    (_set(snapshot_rgb=None), r"field 'snapshot_rgb' is missing while pixels_hue, pixels_coloured, pixels_kept, "
+                              r"snapshot_index, snapshot_segment is present; the segment's counts and pictures come "
+                              r"together$"),
     (_set(object_points=None, perception_valid=None, X_WO_start=None),
-     r"field 'pixels_coloured' is present without the perception fields"),
+     r"field 'pixels_hue' is present without the perception fields"),
     (_set(pixels_coloured=np.ones(13)), r"field 'pixels_coloured' has shape \(13,\) dtype float64; expected \(13,\) "
                                         r"integers$"),
     (_set_item("pixels_kept", 4, -1), r"field 'pixels_kept' has a negative count at sample 4$"),
-    (_set_item("pixels_kept", 7, 10**6), r"field 'pixels_kept' sample 7 keeps 1000000 of \d+ object-coloured pixels; "
-                                         r"the segment keeps object-coloured pixels only$"),
+    (_set_item("pixels_kept", 7, 10**6),
+     r"field 'pixels_kept' is 1000000 at sample 7, more than pixels_coloured \(\d+\); kept pixels are "
+     r"object-coloured, and those are of the object's hue$"),
+    (_set_item("pixels_hue", 2, 10), r"field 'pixels_coloured' is \d+ at sample 2, more than pixels_hue \(10\)"),
     (_set(snapshot_index=np.array([0, 5, 11])),
      r"field 'snapshot_index' is \[0, 5, 11\]; expected 3 integers \[0, first contact, 12\] \(10 Hz samples: "
      r"start, first contact, end\)$"),
@@ -654,8 +658,9 @@ def _set_item(field, index, value):
                                                              r"uint8; expected \(3, h, w, 3\) uint8$"),
     (_set(snapshot_segment=np.zeros((3, 6, 8), dtype=bool)), r"field 'snapshot_segment' has shape \(3, 6, 8\) "
                                                              r"dtype bool; expected \(3, 6, 8\) uint8 like"),
-    (_set_item("snapshot_segment", (1, 2, 3), 3), r"field 'snapshot_segment' holds the value 3; expected 0 \(not "
-                                                  r"object-coloured\), 1 \(object-coloured, dropped\) or 2 \(kept\)$"),
+    (_set_item("snapshot_segment", (1, 2, 3), 4), r"field 'snapshot_segment' holds the value 4; expected 0 \(not of "
+                                                  r"the object's hue\), 1 \(of its hue, not object-coloured\), 2 "
+                                                  r"\(object-coloured, dropped\) or 3 \(kept\)$"),
 ])
 def test_each_invalid_field_is_named(change, message):
     demo = make_demo()

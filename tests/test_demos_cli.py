@@ -59,9 +59,10 @@ def test_export_has_robomimics_layout(tmp_path, demo_dir):
                 assert obs["object_points"].dtype == np.float32
             # Schema 2: per-sample columns in obs, the three pictures beside the 100 Hz data.
             np.testing.assert_array_equal(obs["peak_force"][()], d.peak_force[:, None])
-            assert ("pixels_coloured" in obs) == ("snapshot_rgb" in g["drake_skill"]) == d.has_perception
+            assert ("pixels_hue" in obs) == ("snapshot_rgb" in g["drake_skill"]) == d.has_perception
             if d.has_perception:
                 np.testing.assert_array_equal(obs["pixels_kept"][()], d.pixels_kept[:, None])
+                np.testing.assert_array_equal(obs["pixels_hue"][()], d.pixels_hue[:, None])
                 assert obs["pixels_coloured"].dtype == np.int64 and obs["pixels_coloured"].shape == (n, 1)
                 np.testing.assert_array_equal(g["drake_skill/snapshot_segment"][()], d.snapshot_segment)
             # Actions: the next sample's hand pose (the last repeats its own) and the gripper command.
@@ -328,7 +329,7 @@ def test_a_schema_1_demonstration_goes_through_robomimic_without_the_new_fields(
     old = dc.replace(make_demo(0), **dict.fromkeys(SCHEMA2_FIELDS))
     path, demos = _export(tmp_path, [old])
     with h5py.File(path, "r") as f:
-        assert not {"peak_force", "pixels_coloured", "pixels_kept"} & set(f["data/demo_0/obs"])
+        assert not {"peak_force", "pixels_hue", "pixels_coloured", "pixels_kept"} & set(f["data/demo_0/obs"])
         assert "snapshot_rgb" not in f["data/demo_0/drake_skill"]
     back, = read_robomimic(path)
     _assert_same(old, back)

@@ -60,34 +60,37 @@ def test_short_stretches_are_not_warned_and_the_cause_picks_the_fix():
     assert "to the end: the segment keeps 0 %" in uncoloured and "fail the colour test" in uncoloured
 
 
-def _stored(source: str, drop_from: int | None) -> Demonstration:
-    """8 s of a schema-2 file: 81 frames of 20,000 object-coloured pixels, 99 % kept, 2 % from frame ``drop_from``
-    on; pictures at 0, 3.0 and 8.0 s. No ground-truth scene: nothing to re-pose."""
+def _stored(source: str, coloured_from: int = 81, kept_from: int = 81) -> Demonstration:
+    """8 s of a schema-2 file: 81 frames of 20,000 pixels of the object's hue, all object-coloured and 99 %
+    kept; 2 % object-coloured from frame ``coloured_from`` on, 2 % kept from ``kept_from``; pictures at 0, 3.0
+    and 8.0 s. No ground-truth scene: nothing to re-pose."""
     t = np.linspace(0.0, 8.0, 801)
     pose = np.tile([0.5, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0], (801, 1))
-    coloured = np.full(81, 20_000)
-    kept = np.full(81, 19_800)
-    if drop_from is not None:
-        kept[drop_from:] = 400
+    hue = np.full(81, 20_000)
+    coloured = np.where(np.arange(81) < coloured_from, hue, 400)
+    kept = np.minimum(np.where(np.arange(81) < kept_from, 19_800, 400), coloured)
     rgb = np.full((3, 6, 8, 3), 90, dtype=np.uint8)
     segment = np.zeros((3, 6, 8), dtype=np.uint8)
-    segment[:, 1:5, 2:6] = [[[2]], [[2]], [[1]]]          # the end's object-coloured pixels dropped
+    segment[0, 1:5, 2:6] = 3                                  # kept at the start
+    segment[2, 1:5, 2:4], segment[2, 1:5, 4:6] = 1, 2         # the end: of the hue, not coloured; coloured, dropped
     return Demonstration(skill="open", seed=0, success=True, final_object_state=1.9, times_100hz=t, X_OE_100hz=pose,
                          q_100hz=np.zeros((801, 7)), gripper_100hz=np.zeros(801), object_state_100hz=t / 4,
                          times=t[::10], X_OE=pose[::10], X_WO_true=pose[0], X_WO_start=pose[0],
                          object_points=np.zeros((81, 2048, 3), np.float32), perception_valid=np.zeros(81, bool),
-                         peak_force=np.where(np.arange(81) >= 30, 2.0, 0.0), pixels_coloured=coloured, pixels_kept=kept,
-                         snapshot_index=np.array([0, 30, 80]), snapshot_rgb=rgb, snapshot_segment=segment,
+                         peak_force=np.where(np.arange(81) >= 30, 2.0, 0.0), pixels_hue=hue, pixels_coloured=coloured,
+                         pixels_kept=kept, snapshot_index=np.array([0, 30, 80]), snapshot_rgb=rgb,
+                         snapshot_segment=segment,
                          metadata={"source": source, "snapshot_labels": ["start", "first contact", "end"]})
 
 
 def test_a_schema_2_demo_is_reported_from_its_stored_counts_and_frames(tmp_path, monkeypatch):
-    """The segment dropping the object from 6.6 s is a warning from the file alone: no station is built, no scene
+    """The segment losing the object from 6.6 s is a warning from the file alone, its cause read from the
+    counts (the colour range, or the segment dropping object-coloured pixels): no station is built, no scene
     re-posed, and a robot's demonstration gets its panel too."""
     from types import SimpleNamespace
 
     import drake_skill.station.sim.builder as builder
-    from drake_skill.workflow.fit_report import COLOURED, segment_tracks, write_fit_report
+    from drake_skill.workflow.fit_report import HUE, segment_tracks, write_fit_report
 
     def no_reposing(*args, **kwargs):
         raise AssertionError("a schema-2 demonstration was re-posed")
@@ -96,17 +99,51 @@ def test_a_schema_2_demo_is_reported_from_its_stored_counts_and_frames(tmp_path,
     skill = SimpleNamespace(name="open", info={}, station_config=no_reposing,
                             goal_data=lambda points, valid, X_WO=None: np.zeros((len(points), 2)),
                             pomrp=SimpleNamespace(posteriors=lambda G: (None, np.full((len(G), 2), 0.5), None)))
-    demos = [_stored("scripted", 66), _stored("kinesthetic", None)]
+    demos = [_stored("scripted", coloured_from=66), _stored("kinesthetic", kept_from=70), _stored("kinesthetic")]
     tracks, warnings = segment_tracks(skill, demos)
-    assert warnings == ["demo_000, from t = 6.6 s to the end: the segment keeps 2 % of the object-coloured pixels; "
-                        "the lost pixels pass the colour test and the segment drops them: keep every region "
-                        "(object.colour.cluster_rule: all_regions) or move the camera"]
-    track, robot = tracks["demo_000"], tracks["demo_001"]
-    assert track.of == robot.of == COLOURED and robot.kept_fraction.min() == pytest.approx(0.99)
+    assert warnings == [
+        "demo_000, from t = 6.6 s to the end: the segment keeps 2 % of the pixels of the object's hue; most of the "
+        "lost pixels fail the colour test: widen the scenario's object colour range (object.colour value_min, "
+        "saturation_min or the hue range)",
+        "demo_001, from t = 7.0 s to the end: the segment keeps 2 % of the pixels of the object's hue; the lost "
+        "pixels pass the colour test and the segment drops them: keep every region (object.colour.cluster_rule: "
+        "all_regions) or move the camera"]
+    track = tracks["demo_000"]
+    assert track.of == tracks["demo_002"].of == HUE and tracks["demo_002"].kept_fraction.min() == pytest.approx(0.99)
     assert [(w, t) for w, t, _ in track.snapshots] == [("start", 0.0), ("first contact", 3.0), ("end", 8.0)]
     start, end = track.snapshots[0][2].astype(int), track.snapshots[2][2].astype(int)
-    assert start[2, 3].tolist() == [45, 145, 45] and end[2, 3].tolist() == [160, 45, 45]    # kept green, dropped red
-    assert start[0, 0].tolist() == [90, 90, 90]                                             # the rest as it was
+    assert start[2, 3].tolist() == [45, 145, 45] and start[0, 0].tolist() == [90, 90, 90]   # kept green, the rest
+    assert end[2, 3].tolist() == [45, 85, 172] and end[2, 4].tolist() == [160, 45, 45]      # blue, red
     page = write_fit_report(tmp_path / "fit_report.html", skill, demos, tracks, warnings).read_text()
-    assert page.count("<figure>") == 6 and "first contact, t = 3.0 s" in page and "no segment panel" not in page
-    assert "from t = 6.6 s to the end: the segment keeps 2 % of the object-coloured pixels" in page
+    assert page.count("<figure>") == 9 and "first contact, t = 3.0 s" in page and "no segment panel" not in page
+    assert "from t = 6.6 s to the end: the segment keeps 2 % of the pixels of the object&#x27;s hue" in page
+
+
+def test_a_recording_whose_colour_range_cuts_the_boxs_shaded_faces_warns_from_its_stored_counts():
+    """Schema 2 on a rendered scene: Open's closed box (seed 0) at value_min 0.5 for 1 s. A third of the pixels of
+    the box's hue pass the colour test (its lit top; 6,786 of 20,171 measured), and the warning says so, from
+    the file's counts alone."""
+    from types import SimpleNamespace
+
+    from drake_skill.demos.demonstrator import demonstration_from
+    from drake_skill.station.pose_source import hold_plan
+    from drake_skill.station.sim.simulation import StationSimulation
+    from drake_skill.workflow.fit_report import segment_tracks
+
+    config = scenario_for_skill("open")
+    config.object.colour.value_min = 0.5
+    sim = StationSimulation(config, perceive=True)
+    X_WO = sim.reset(0)
+    sim.set_plan(hold_plan(sim.home_pose()))
+    recorder = sim.recorder(100.0, 10.0)
+    recorder.anchor()
+    for _ in range(101):
+        recorder.sample(0.0)
+    demo = demonstration_from(recorder, "open", 0, X_WO, success=False, metadata={"source": "scripted"})
+    assert np.all(demo.pixels_coloured < 0.4 * demo.pixels_hue)
+    assert np.all(demo.pixels_kept > 0.95 * demo.pixels_coloured)
+    _, warnings = segment_tracks(SimpleNamespace(), [demo])        # no skill: nothing is re-posed
+    (warning,) = warnings
+    assert re.fullmatch(r"demo_000, from t = 0\.0 s to the end: the segment keeps 3\d % of the pixels of the object's "
+                        r"hue; most of the lost pixels fail the colour test: widen the scenario's object colour range "
+                        r"\(object\.colour value_min, saturation_min or the hue range\)", warning), warning

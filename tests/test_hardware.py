@@ -42,7 +42,7 @@ from drake_skill.station.hardware.config import HardwareConfig, load_hardware_co
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource
 from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.sim.lcm_robot import DriverProtocolError, SimRobot
-from drake_skill.station.recording import pose_to_vector
+from drake_skill.station.recording import advance_station, pose_to_vector
 from drake_skill.station.sim.simulation import StationSimulation
 
 #: Ports the physics issue adds to the simulated station (the hardware one has them already).
@@ -351,7 +351,7 @@ def test_jump_is_rate_limited_clipped_and_stale_status_stops_the_station():
         p = station.GetOutputPort("ee_pose").Eval(station_context).translation()
         robot.stop()                              # the robot's status stops
         with pytest.raises(StaleStatusError, match="no status from the robot") as stale:
-            simulator.AdvanceTo(4.0)
+            advance_station(simulator, station, context, 4.0)
     finally:
         robot.stop()
     for _ in range(20):
@@ -435,8 +435,25 @@ def test_the_robots_own_reflex_stops_the_station(mode):
     context = monitor.CreateDefaultContext()
     monitor.GetInputPort("status").FixValue(context, _status(mode))
     monitor.GetInputPort("torque_external").FixValue(context, np.zeros(7))
-    with pytest.raises(ReflexError, match="robot reflex" if mode == lcmt_panda_status.kReflex else "user stop"):
-        Simulator(monitor, context).AdvanceTo(0.02)
+    monitor.GetInputPort("torque_external").FixValue(context, np.arange(7.0))
+    simulator = Simulator(monitor, context)
+    # The check stops the simulator at its instant (no exception inside it); the reason is in its state.
+    assert monitor.stop_error(context) is None
+    status = simulator.AdvanceTo(0.02)
+    assert status.reason() == status.ReturnReason.kReachedTerminationCondition
+    assert status.return_time() == 0.0 and status.system() is monitor     # the check at t = 0
+    error = monitor.stop_error(context)
+    assert isinstance(error, ReflexError) and error.reason == "reflex"
+    assert error.cause == ("robot reflex" if mode == lcmt_panda_status.kReflex else "robot user stop")
+    assert error.time_s == 0.0 and list(error.torque_Nm) == list(range(7))
+    # The stop holds until the next reset (the next check stops again); then the monitor runs again.
+    again = simulator.AdvanceTo(0.03)
+    assert again.reason() == status.ReturnReason.kReachedTerminationCondition and again.return_time() <= 0.005
+    assert monitor.stop_error(context).time_s == 0.0
+    monitor.GetInputPort("status").FixValue(context, _status(lcmt_panda_status.kMove, utime=2))
+    monitor.mark_fresh(context)
+    assert monitor.stop_error(context) is None
+    assert simulator.AdvanceTo(0.03).reason() == status.ReturnReason.kReachedBoundaryTime
 
 
 def test_measured_external_torque_goes_to_the_shared_reflex_check():

@@ -20,8 +20,8 @@ prints the goal model's summary, and writes SKILL_DIR:
                         contact force (drake_skill.workflow.fit_report)
 
 A stretch of half a second or more in which the segment keeps less than half
-of the object's object-coloured pixels (schema 2) or visible pixels (schema 1,
-re-posed) is a warning line naming the demonstration, the time and the fix
+of the pixels of the object's hue (schema 2) or of its visible pixels (schema
+1, re-posed) is a warning line naming the demonstration, the time and the fix
 (the colour range, or the clustering).
 """
 

@@ -185,7 +185,7 @@ def _record_demo(args) -> int:
     from drake_skill.demos.format import append_demonstration, existing_demo_files, load_demonstrations
     from drake_skill.station.hardware.station import build_hardware_station
     from drake_skill.station.pose_source import PoseTrajectorySource, hold_plan
-    from drake_skill.station.recording import StationRecorder
+    from drake_skill.station.recording import StationRecorder, advance_station
 
     if not args.duration > 0:
         raise ValueError(f"--duration must be positive, got {args.duration}")
@@ -216,7 +216,7 @@ def _record_demo(args) -> int:
     X_WE = station.GetOutputPort("ee_pose").Eval(station.GetMyContextFromRoot(context))
     hold.set_plan(hold.GetMyMutableContextFromRoot(context), hold_plan(X_WE, config.station.gripper_home))
     simulator.Initialize()
-    simulator.AdvanceTo(0.1)       # the status of now, not of the reset, in the first sample
+    advance_station(simulator, station, context, 0.1)   # the status of now, not of the reset, in the first sample
     frame_hz = float(config.station.camera.fps) if segmenter is not None else 10.0
     recorder = StationRecorder(station, context, simulator, 100.0, frame_hz, segmenter)
     recorder.anchor()

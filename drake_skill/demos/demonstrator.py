@@ -25,7 +25,7 @@ recording would:
   an invalid frame holds the last valid one), a validity flag, and the
   perceived X_WO at the first valid frame. The full 640 x 480 clouds are not kept: 100 frames of
   307,200 points are ~370 MB per demonstration. Per frame, how many pixels were
-  object-coloured and how many the segment kept, the peak contact force, and three
+  of the object's hue, object-coloured and kept by the segment, the peak contact force, and three
   small pictures with the segment (start, first contact, end; schema 2,
   ``drake_skill.demos.format``).
 
@@ -285,11 +285,11 @@ def _segment_fields(recorder: StationRecorder, peak_force: np.ndarray,
     """The recorder's pixel counts and its start / first contact / end pictures as the
     Demonstration's ``pixels_*`` and ``snapshot_*`` fields, and the pictures' labels."""
     index, labels = snapshot_frames(peak_force, object_state)
-    counts = np.array(recorder.pixel_counts, dtype=np.int64).reshape(-1, 2)
+    counts = np.array(recorder.pixel_counts, dtype=np.int64).reshape(-1, 3)
     shots = [recorder.pixels[k] for k in index]
-    return dict(pixels_coloured=counts[:, 0], pixels_kept=counts[:, 1], snapshot_index=index,
+    return dict(pixels_hue=counts[:, 0], pixels_coloured=counts[:, 1], pixels_kept=counts[:, 2], snapshot_index=index,
                 snapshot_rgb=np.stack([p.rgb for p in shots]),
-                snapshot_segment=np.stack([p.coloured.astype(np.uint8) + p.kept for p in shots])), labels
+                snapshot_segment=np.stack([p.hue.astype(np.uint8) + p.coloured + p.kept for p in shots])), labels
 
 
 # --------------------------------------------------------------------------- demonstrator

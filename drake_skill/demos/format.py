@@ -38,18 +38,22 @@ Fields of :class:`Demonstration` (T raw samples at 100 Hz, T10 at 10 Hz):
                                        10 Hz sample (the first: its own), or
                                        None (schema 1); 0 on the robot, which
                                        measures joint torques, not contact force
-``pixels_coloured``    (T10,) int64    object-coloured pixels (the segmenter's
-                                       colour test) of the camera image the
+``pixels_hue``         (T10,) int64    pixels of the object's hue (the colour
+                                       test widened: perception.segmentation.
+                                       hue_config) in the camera image the
                                        segmenter read, or None
-``pixels_kept``        (T10,) int64    of those, the pixels the segment kept
-                                       (<= pixels_coloured), or None
+``pixels_coloured``    (T10,) int64    of those, the object-coloured pixels
+                                       (the segmenter's colour test), or None
+``pixels_kept``        (T10,) int64    of those, the pixels the segment kept,
+                                       or None
 ``snapshot_index``     (3,) int64      the 10 Hz samples shown as pictures: 0
                                        (start), first contact, T10 - 1 (end)
 ``snapshot_rgb``       (3, h, w, 3)    their camera images, downscaled (every
                        uint8           k-th pixel, w <= 80), or None
-``snapshot_segment``   (3, h, w) uint8 per pixel 0: not object-coloured, 1:
-                                       object-coloured but dropped by the
-                                       segment, 2: kept; or None
+``snapshot_segment``   (3, h, w) uint8 per pixel 0: not of the object's hue,
+                                       1: of its hue but not object-coloured,
+                                       2: object-coloured but dropped by the
+                                       segment, 3: kept; or None
 ``skill``, ``seed``, ``success``, ``final_object_state``
                                        what was demonstrated, the seed that
                                        produced it, the ground-truth verdict
@@ -65,15 +69,20 @@ the goal model uses.
 Schema 2 adds ``peak_force`` and, with the camera, the segment's pixel counts
 and three small pictures (``pixels_*``, ``snapshot_*``): enough to see
 afterwards, also for a demonstration recorded on the robot, when the segment
-lost the object (``drake-skill fit``'s ``fit_report.html`` and its warnings).
+lost the object and why (``drake-skill fit``'s ``fit_report.html`` and its
+warnings): without ground truth, the pixels of the object's hue stand for the
+object's, those of them that fail the colour test are what the colour range
+drops, and object-coloured pixels the segment does not keep are what the
+crop, the table removal and the cluster rule drop.
 "First contact" is the first 10 Hz sample whose ``peak_force`` exceeds
 :data:`CONTACT_FORCE_N` (free motion reads 0 N); without one (no touch, or
 the robot) the first at which the object state moved :data:`MOVE_FRACTION`
-of its travel (of :data:`MIN_TRAVEL` or more), else the middle sample; ``metadata["snapshot_labels"]`` says
-which. Their size: 24 bytes per 10 Hz sample (``peak_force`` and the two
-counts) and, at w x h pixels, 12 w h bytes for the pictures; measured on a
-14.6 s scripted demonstration of Open (147 samples, crop 282 x 265 -> 71 x 67
-pixels): 3.5 kB + 57 kB = 61 kB, 1.6 % of its 3.9 MB file.
+of its travel (of :data:`MIN_TRAVEL` or more), else the middle sample;
+``metadata["snapshot_labels"]`` says which. Their size: 32 bytes per 10 Hz
+sample (``peak_force`` and the three counts) and, at w x h pixels, 12 w h
+bytes for the pictures; measured on a 14.6 s scripted demonstration of Open
+(147 samples, crop 282 x 265 -> 71 x 67 pixels): 4.7 kB + 57 kB = 62 kB,
+1.6 % of its 3.9 MB file.
 
 File format (``SCHEMA_VERSION`` = 2; version 1 files, without the schema-2
 fields, still load): a numpy ``.npz`` written atomically,
@@ -159,8 +168,9 @@ UNITS = {
     "object_state_100hz": "rad (box lid angle) or m (drawer travel)",
     "X_WO_true": "m, unit quaternion wxyz", "X_WO_start": "m, unit quaternion wxyz",
     "object_points": "m", "final_object_state": "rad (box lid angle) or m (drawer travel)",
-    "peak_force": "N", "pixels_coloured": "pixels", "pixels_kept": "pixels",
-    "snapshot_segment": "0 not object-coloured, 1 object-coloured but dropped, 2 kept",
+    "peak_force": "N", "pixels_hue": "pixels", "pixels_coloured": "pixels", "pixels_kept": "pixels",
+    "snapshot_segment": "0 not of the object's hue, 1 of its hue, not object-coloured, 2 object-coloured, "
+                        "dropped, 3 kept",
 }
 FRAMES = {
     "X_OE_100hz": "pose of the hand TCP frame E in the object frame O",
@@ -174,7 +184,7 @@ _RAW = ("times_100hz", "X_OE_100hz", "q_100hz", "gripper_100hz", "object_state_1
 _PERCEPTION = ("X_WO_start", "object_points", "perception_valid")
 _SCALARS = ("skill", "seed", "success", "final_object_state")
 #: Schema 2's camera group (needs the perception fields).
-_SEGMENT = ("pixels_coloured", "pixels_kept", "snapshot_index", "snapshot_rgb", "snapshot_segment")
+_SEGMENT = ("pixels_hue", "pixels_coloured", "pixels_kept", "snapshot_index", "snapshot_rgb", "snapshot_segment")
 _SCHEMA2 = ("peak_force",) + _SEGMENT
 
 
@@ -206,6 +216,7 @@ class Demonstration:
     object_points: np.ndarray | None = None
     perception_valid: np.ndarray | None = None
     peak_force: np.ndarray | None = None
+    pixels_hue: np.ndarray | None = None
     pixels_coloured: np.ndarray | None = None
     pixels_kept: np.ndarray | None = None
     snapshot_index: np.ndarray | None = None
@@ -222,7 +233,7 @@ class Demonstration:
     @property
     def has_segment(self) -> bool:
         """The segment's pixel counts and pictures are stored (schema 2, recorded with the camera)."""
-        return self.pixels_coloured is not None
+        return self.pixels_hue is not None
 
     @property
     def duration(self) -> float:
@@ -304,13 +315,14 @@ class Demonstration:
         if not present:
             return
         if not self.has_perception:
-            _fail(where, "pixels_coloured", "is present without the perception fields (object_points, ...)")
-        coloured = _counts(where, "pixels_coloured", self.pixels_coloured, (m,))
-        kept = _counts(where, "pixels_kept", self.pixels_kept, (m,))
-        if np.any(kept > coloured):
-            k = int(np.argmax(kept > coloured))
-            _fail(where, "pixels_kept", f"sample {k} keeps {kept[k]} of {coloured[k]} object-coloured pixels; "
-                  "the segment keeps object-coloured pixels only")
+            _fail(where, "pixels_hue", "is present without the perception fields (object_points, ...)")
+        names = _SEGMENT[:3]
+        counts = [_counts(where, name, getattr(self, name), (m,)) for name in names]
+        for j in (1, 2):
+            if np.any(counts[j] > counts[j - 1]):
+                k = int(np.argmax(counts[j] > counts[j - 1]))
+                _fail(where, names[j], f"is {counts[j][k]} at sample {k}, more than {names[j - 1]} "
+                      f"({counts[j - 1][k]}); kept pixels are object-coloured, and those are of the object's hue")
         _snapshots(where, self.snapshot_index, self.snapshot_rgb, self.snapshot_segment, m)
 
     def to_arrays(self) -> dict[str, np.ndarray]:
@@ -404,7 +416,7 @@ def _counts(where, field, value, shape) -> np.ndarray:
 
 def _snapshots(where, index, rgb, segment, m) -> None:
     """snapshot_index (3,) 0 <= first contact <= m - 1 in order, from 0 to m - 1; rgb (3, h, w, 3) and
-    segment (3, h, w) uint8 with values 0, 1, 2."""
+    segment (3, h, w) uint8 with values 0-3."""
     if not isinstance(index, np.ndarray) or index.dtype.kind not in "iu" or index.shape != (3,) \
             or index[0] != 0 or index[2] != m - 1 or not 0 <= index[1] <= m - 1:
         shown = index.tolist() if isinstance(index, np.ndarray) and index.size <= 3 else getattr(index, "shape", index)
@@ -417,9 +429,9 @@ def _snapshots(where, index, rgb, segment, m) -> None:
     if not isinstance(segment, np.ndarray) or segment.dtype != np.uint8 or segment.shape != rgb.shape[:3]:
         _fail(where, "snapshot_segment", f"has shape {getattr(segment, 'shape', None)} dtype "
               f"{getattr(segment, 'dtype', None)}; expected {rgb.shape[:3]} uint8 like snapshot_rgb")
-    if segment.max() > 2:
-        _fail(where, "snapshot_segment", f"holds the value {int(segment.max())}; expected 0 (not object-coloured), "
-              "1 (object-coloured, dropped) or 2 (kept)")
+    if segment.max() > 3:
+        _fail(where, "snapshot_segment", f"holds the value {int(segment.max())}; expected 0 (not of the object's "
+              "hue), 1 (of its hue, not object-coloured), 2 (object-coloured, dropped) or 3 (kept)")
 
 
 # ---------------------------------------------------------------- pose math

@@ -20,8 +20,9 @@ data and of its camera frames; docs/method.md section 1), T10 of them:
 ``obs/object_points_valid``      (T10,) bool     the segmentation found the object
 ``obs/peak_force``               (T10, 1) f64    peak contact force since the
                                                  previous sample [N] (schema 2)
-``obs/pixels_coloured``          (T10, 1) i64    object-coloured pixels of the
+``obs/pixels_hue``               (T10, 1) i64    pixels of the object's hue in the
                                                  camera image (schema 2)
+``obs/pixels_coloured``          (T10, 1) i64    of those, object-coloured
 ``obs/pixels_kept``              (T10, 1) i64    of those, kept by the segment
 ``actions``                      (T10, 8) f64    [X_OE of the next sample (7),
                                                  gripper opening (1)]
@@ -66,7 +67,7 @@ FORMATS = ("robomimic",)
 #: The Demonstration arrays kept in data/demo_N/drake_skill (the rest are read from obs).
 _RAW = ("times_100hz", "X_OE_100hz", "q_100hz", "gripper_100hz", "object_state_100hz", "times", "X_WO_true")
 #: Schema 2's per-sample fields, kept in obs as (T10, 1) columns.
-_COLUMNS = ("peak_force", "pixels_coloured", "pixels_kept")
+_COLUMNS = ("peak_force", "pixels_hue", "pixels_coloured", "pixels_kept")
 #: Schema 2's pictures, kept in data/demo_N/drake_skill.
 _SNAPSHOTS = ("snapshot_index", "snapshot_rgb", "snapshot_segment")
 
@@ -218,7 +219,7 @@ def _read_demos(f, path: Path) -> list[Demonstration]:
                               perception_valid=_get(where, g["obs"], "object_points_valid"),
                               X_WO_start=_get(where, raw, "X_WO_start"))
         schema2 = {name: np.reshape(_get(where, g["obs"], name), -1) for name in _COLUMNS if name in obs}
-        if "pixels_coloured" in obs:
+        if "pixels_hue" in obs:
             schema2.update({name: _get(where, raw, name) for name in _SNAPSHOTS})
         demo = Demonstration(
             skill=str(attrs["skill"]), seed=int(attrs["seed"]), success=bool(attrs["success"]),

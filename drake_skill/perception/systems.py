@@ -330,9 +330,9 @@ class ObjectSegmenter(LeafSystem):
         return self._frame_cache.Eval(context).result
 
     def eval_pixels(self, context) -> SegmentPixels:
-        """The current frame's colour image, object-coloured pixels and the segment's pixels
-        (:func:`~drake_skill.perception.segmentation.segment_pixels`; nothing kept before the
-        table plane is known). A demonstration's recorder counts them at every frame."""
+        """The current frame's colour image and its pixels of the object's hue, object-coloured and
+        kept by the segment (:func:`~drake_skill.perception.segmentation.segment_pixels`; nothing
+        kept before the table plane is known). A demonstration's recorder counts them at every frame."""
         _, rgb = self._read_cloud(context)
         result = self.eval_frame(context)
         return segment_pixels(rgb, self._config.segmentation, self._image_shape,

@@ -64,6 +64,11 @@ class StationInterface(Protocol):
     def reset(self, context, seed: int | None = None) -> RigidTransform:
         """Home arm, object at the pose of ``seed`` (nominal for None); returns X_WO."""
 
+    def stop_error(self, context) -> RuntimeError | None:
+        """Why the station stopped the simulator (its monitors returned
+        ``EventStatus.ReachedTermination`` and keep the reason in their state), as the typed
+        error (``ReflexError``, ``StaleStatusError``), or None; ``context``: a root context."""
+
 
 def port_signature(port) -> tuple[str, object]:
     """(data type name, size or abstract value type name) of a Drake port; template

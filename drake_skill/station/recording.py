@@ -110,9 +110,12 @@ class RunLog:
 
 def advance_station(simulator, station, root_context, t: float, pending: bool = False) -> None:
     """``simulator.AdvanceTo(t)`` (and, with ``pending``, the events due at t) on a diagram
-    holding ``station``. Raises :class:`ReflexError` when the station's reflex monitor
-    stopped the simulator (from the monitor's state), :class:`SolverError` when SAP
-    failed to converge, RuntimeError when another system ended the simulation."""
+    holding ``station``. A station's monitors stop the simulator by returning
+    ``EventStatus.ReachedTermination`` and keep the reason in their state; this raises
+    it as the station's typed error (``station.stop_error``: :class:`ReflexError`, on
+    the robot also ``StaleStatusError``), outside the simulator. Raises
+    :class:`SolverError` when SAP failed to converge, RuntimeError when another system
+    ended the simulation."""
     try:
         status = None
         if t > root_context.get_time():
@@ -126,12 +129,11 @@ def advance_station(simulator, station, root_context, t: float, pending: bool = 
             raise SolverError(f"the contact solver failed to converge at t = {time_s:.3f} s: {e}", time_s) from e
         raise
     if tripped:
-        monitor = station.reflex_monitor
-        trip = monitor.trip(monitor.GetMyContextFromRoot(root_context))
-        if trip is None:     # another system ended the simulation
+        error = station.stop_error(root_context)
+        if error is None:     # another system ended the simulation
             raise RuntimeError(f"the simulation ended at t = {status.return_time():.3f} s: "
                                f"{status.FormatMessage()}")
-        raise ReflexError(*trip)
+        raise error
 
 
 def check_joint_state(state, t: float) -> None:
@@ -153,10 +155,11 @@ class StationRecorder:
 
     Per frame it also keeps ``frame_force``, the peak of ``force`` over the samples
     since the previous frame (this one included) [N], and, with a segmenter,
-    ``pixel_counts`` (object-coloured pixels of the segmenter's image, pixels
-    its segment kept: ``ObjectSegmenter.eval_pixels``) and ``pixels``, that
-    frame's image and masks downscaled to at most :data:`FRAME_WIDTH_PX`
-    wide (what a demonstration's three stored frames are chosen from).
+    ``pixel_counts`` (pixels of the object's hue in the segmenter's image, the
+    object-coloured ones, those its segment kept: ``ObjectSegmenter.eval_pixels``)
+    and ``pixels``, that frame's image and masks downscaled to at most
+    :data:`FRAME_WIDTH_PX` wide (what a demonstration's three stored frames are
+    chosen from).
 
     The grid is anchored at a frame time (or, without frames, at the current
     time). Drake handles a discrete update due at time t at the start of the

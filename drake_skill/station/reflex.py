@@ -126,6 +126,13 @@ class ReflexMonitor(LeafSystem):
         context.get_mutable_discrete_state(self._tau_peak).SetFromVector(np.abs(tau))
         return peak
 
+    def stop_error(self, context):
+        """The trip the state shows as the typed error (``station.recording.ReflexError``), or None."""
+        from drake_skill.station.recording import ReflexError
+
+        trip = self.trip(context)
+        return None if trip is None else ReflexError(*trip)
+
     def trip(self, context) -> ReflexTrip | None:
         """The trip the state shows (None when the filter is within the thresholds)."""
         x = context.get_discrete_state(self._state).get_value()

@@ -5,15 +5,15 @@
 finding (``warning: DEMO: what, when; how to fix``). Per demonstration:
 
 - **the segment over time.** A demonstration file of schema 2 stores it
-  (``drake_skill.demos.format``): per 10 Hz frame the object-coloured pixels
-  of the camera image and those the segment kept, and three small frames
-  (start, first contact, end) with the segment; the kept fraction is then
-  kept / object-coloured (no ground truth is needed, so a demonstration
-  recorded on the robot gets the panel too), and a stretch under
-  :data:`KEPT_WARN` means the segment drops object-coloured pixels (the crop,
-  the table removal or the cluster rule). The object's pixels that fail the
-  colour test are in neither count (without ground truth nothing tells them
-  from the background): the stored frames show them, unmarked.
+  (``drake_skill.demos.format``): per 10 Hz frame the camera image's pixels
+  of the object's hue (the colour test widened, ``hue_config``: without
+  ground truth they stand for the object's pixels), the object-coloured ones
+  and those the segment kept, and three small frames (start, first contact,
+  end) with the segment. No station is built and no scene re-posed, so a
+  demonstration recorded on the robot gets the panel too; the kept fraction
+  is kept / of the object's hue, and the cause of a loss is read as below
+  (of the object's hue but not object-coloured: the colour range). Other
+  things of the object's hue in the view lower it.
   For a schema-1 file the scene of the recording is posed again on the
   scenario's simulated station from the demonstration's own record (arm
   joints, fingers, the object's true pose and joint, every ``every_s``
@@ -50,10 +50,10 @@ import numpy as np
 
 from drake_skill.fileio import atomic_write_text, png_data_url
 
-__all__ = ["COLOURED", "KEPT_WARN", "MIN_WARN_S", "VISIBLE", "SegmentTrack", "segment_tracks", "segment_warnings",
+__all__ = ["HUE", "KEPT_WARN", "MIN_WARN_S", "VISIBLE", "SegmentTrack", "segment_tracks", "segment_warnings",
            "stored_track", "track_segment", "write_fit_report"]
 
-#: A stretch of frames keeping less than this fraction of the object's (visible or object-coloured) pixels is
+#: A stretch of frames keeping less than this fraction of the object's pixels (visible, or of its hue) is
 #: warned about ...
 KEPT_WARN = 0.5
 #: ... when it lasts at least this long [s].
@@ -62,8 +62,8 @@ MIN_WARN_S = 0.5
 COLOUR_CAUSE = 0.5
 #: What a track's kept fraction is of: a re-posed scene's object pixels (the renderer's labels) ...
 VISIBLE = "the object's visible pixels"
-#: ... or a schema-2 file's stored object-coloured pixels.
-COLOURED = "the object-coloured pixels"
+#: ... or a schema-2 file's stored pixels of the object's hue.
+HUE = "the pixels of the object's hue"
 #: metadata["source"] of a demonstration recorded on the robot (drake-skill hardware record-demo).
 ROBOT_SOURCES = ("kinesthetic", "robot")
 
@@ -71,7 +71,7 @@ ROBOT_SOURCES = ("kinesthetic", "robot")
 @dc.dataclass
 class SegmentTrack:
     """One demonstration's segment over time: times (N,) [s]; per frame the pixels the kept fraction is
-    of (``visible``: :data:`VISIBLE` of a re-posed scene, or :data:`COLOURED` stored in the file, as
+    of (``visible``: :data:`VISIBLE` of a re-posed scene, or :data:`HUE` stored in the file, as
     ``of`` says), those of them that pass the colour test, those the segment keeps; ``snapshots``:
     (what, t [s], (h, w, 3) uint8 image with the segment drawn over it)."""
 
@@ -164,15 +164,16 @@ def track_segment(station, demo, every_s: float = 0.5) -> SegmentTrack:
 
 def stored_track(demo) -> SegmentTrack:
     """The segment of a schema-2 demonstration (``demo.has_segment``) from its stored counts and frames:
-    no simulation, so a robot's demonstration too. The kept fraction is of :data:`COLOURED`; the frames
-    show kept pixels green and object-coloured but dropped ones red."""
+    no simulation, so a robot's demonstration too. The kept fraction is of :data:`HUE`; the frames
+    show kept pixels green, object-coloured but dropped ones red, and those of the object's hue that
+    fail the colour test blue."""
     t = demo.times - demo.times[0]
-    coloured, kept = demo.pixels_coloured.astype(int), demo.pixels_kept.astype(int)
+    hue, coloured, kept = (c.astype(int) for c in (demo.pixels_hue, demo.pixels_coloured, demo.pixels_kept))
     labels = demo.metadata.get("snapshot_labels", ["start", "first contact", "end"])
-    snapshots = [(what, float(t[k]), _overlay(rgb, segment > 0, segment > 0, segment == 2))
+    snapshots = [(what, float(t[k]), _overlay(rgb, segment >= 1, segment >= 2, segment == 3))
                  for what, k, rgb, segment in zip(labels, demo.snapshot_index, demo.snapshot_rgb,
                                                   demo.snapshot_segment)]
-    return SegmentTrack(t, coloured, coloured, kept, snapshots, of=COLOURED)
+    return SegmentTrack(t, hue, coloured, kept, snapshots, of=HUE)
 
 
 def segment_warnings(name: str, track: SegmentTrack) -> list[str]:
@@ -264,12 +265,9 @@ def _demo_figure(skill, demo, track: SegmentTrack | None) -> str:
 
 
 def _segment_panel(ax, track: SegmentTrack) -> None:
-    if track.of == COLOURED:
-        ax.plot(track.times, track.kept_fraction, label="kept / object-coloured")
-        ax.plot(track.times, track.coloured / max(track.coloured.max(), 1), "--", label="object-coloured / their most")
-    else:
-        ax.plot(track.times, track.kept_fraction, label="kept / visible")
-        ax.plot(track.times, track.coloured / np.maximum(track.visible, 1), "--", label="object-coloured / visible")
+    of = "visible" if track.of == VISIBLE else "of the object's hue"
+    ax.plot(track.times, track.kept_fraction, label=f"kept / {of}")
+    ax.plot(track.times, track.coloured / np.maximum(track.visible, 1), "--", label=f"object-coloured / {of}")
     ax.axhline(KEPT_WARN, color="red", lw=0.8, ls=":", label="warning below")
     ax.set_ylim(-0.05, 1.05)
     ax.set_ylabel("object pixels")
@@ -323,8 +321,8 @@ image-rendering:pixelated}.warn{color:#a00}"""
 
 _LEGEND = ("Segment drawn over the object camera's crop: <span style='color:#0a0'>kept</span>, "
            "<span style='color:#d00'>object-coloured but dropped</span>, "
-           "<span style='color:#05f'>object but not object-coloured</span> (a scene re-posed in simulation, "
-           "for a demonstration file of schema 1; a schema-2 file's stored frames have no ground truth).")
+           "<span style='color:#05f'>object (in a schema-2 file's stored frames: of the object's hue) but not "
+           "object-coloured</span>.")
 
 
 def write_fit_report(path, skill, demos, tracks: dict, warnings: list[str]) -> Path:

@@ -70,7 +70,7 @@ from pydrake.manipulation import PandaStatusReceiver, SchunkWsgCommandSender
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import ContactResults
 from pydrake.perception import BaseField, DepthImageToPointCloud
-from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus, LeafSystem
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource, Multiplexer
 from pydrake.systems.sensors import PixelType
@@ -156,18 +156,27 @@ class PandaCommandEncoder(LeafSystem):
         output.set_value(msg)
 
 
+#: StatusMonitor's stop codes, kept in its state (0: running).
+STOP_STALE, STOP_ROBOT_REFLEX, STOP_USER_STOPPED = 1, 2, 3
+
+
 class StatusMonitor(LeafSystem):
-    """Watches the status messages; raises before a command goes out on a bad one.
+    """Watches the status messages; stops the simulator before a command goes out on a bad one.
 
     Input ``status`` (Python ``lcmt_panda_status``), ``torque_external`` (7) [N m].
-    Discrete state [utime of the last new status, context time it was seen].
-    Every ``period`` s: a status with a new ``utime`` refreshes the state; a
-    status older than ``timeout`` s raises :class:`StaleStatusError`; a
-    status whose ``robot_mode`` is kReflex or kUserStopped (the robot
-    stopped itself) raises :class:`ReflexError`. The error ends the
-    simulator's step: no command goes out after the instant of the check.
-    (The reflex limits on the external torque are checked where the
-    simulated station's are, by the recorder's monitor on
+    Discrete state [utime of the last new status, context time it was seen,
+    stop code, time of the stop]. Every ``period`` s: a status with a new
+    ``utime`` refreshes the state; a status older than ``timeout`` s
+    (:data:`STOP_STALE`), or one whose ``robot_mode`` is kReflex or kUserStopped
+    (the robot stopped itself), stops the run: the check keeps the reason in
+    the state and returns ``EventStatus.ReachedTermination``, so the
+    simulator's step ends at the instant of the check and no command goes out
+    after it. The stop holds until :meth:`mark_fresh` (a run's reset).
+    :meth:`stop_error` turns the state into the typed error
+    (:class:`StaleStatusError`, :class:`ReflexError`), which
+    ``station.recording.advance_station`` raises outside the simulator. (The
+    reflex limits on the external torque are checked where the simulated
+    station's are, by the reflex monitor on
     :meth:`HardwareStation.robot_scene_contact`.)
     """
 
@@ -176,35 +185,50 @@ class StatusMonitor(LeafSystem):
         self._timeout, self._channel = float(timeout), channel
         self._status = self.DeclareAbstractInputPort("status", AbstractValue.Make(lcmt_panda_status()))
         self._tau = self.DeclareVectorInputPort("torque_external", N_JOINTS)
-        self._state = self.DeclareDiscreteState(2)   # [last utime, time seen]
+        self._state = self.DeclareDiscreteState(4)   # [last utime, time seen, stop code, stop time]
+        self._stop_tau = self.DeclareDiscreteState(N_JOINTS)   # external torque at a robot stop [N m]
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._check)
 
     def mark_fresh(self, context) -> None:
-        """Records the status now in ``context`` as seen at the context's time."""
+        """Records the status now in ``context`` as seen at the context's time; clears a stop."""
         msg = self._status.Eval(context)
-        context.get_mutable_discrete_state(self._state).SetFromVector([float(msg.utime), context.get_time()])
+        context.get_mutable_discrete_state(self._state).SetFromVector([float(msg.utime), context.get_time(), 0, 0])
 
     def last_seen(self, context) -> float:
         """Context time [s] the last new status was seen at."""
         return float(context.get_discrete_state(self._state).get_value()[1])
 
-    def _check(self, context, discrete_state):
-        msg = self._status.Eval(context)
-        last_utime, seen = context.get_discrete_state(self._state).get_value()
-        t = context.get_time()
-        if msg.num_joints and float(msg.utime) != last_utime:
-            last_utime, seen = float(msg.utime), t
-            discrete_state.get_mutable_vector(self._state).SetFromVector([last_utime, seen])
-        age = t - seen
-        if age > self._timeout:
-            raise StaleStatusError(
-                f"no status from the robot on LCM channel {self._channel!r} for {age * 1e3:.0f} ms "
+    def stop_error(self, context) -> RuntimeError | None:
+        """The typed error of the stop the state holds, or None while running."""
+        _, seen, code, t = context.get_discrete_state(self._state).get_value()
+        if code == STOP_STALE:
+            return StaleStatusError(
+                f"no status from the robot on LCM channel {self._channel!r} for {(t - seen) * 1e3:.0f} ms "
                 f"(limit {self._timeout * 1e3:.0f} ms, last at t = {seen:.3f} s, now t = {t:.3f} s): "
                 "stopped commanding. Check that the driver runs, its --lcm_url and channels, and the network",
                 last_seen=seen, detected_at=t)
-        if msg.num_joints and msg.robot_mode in (lcmt_panda_status.kReflex, lcmt_panda_status.kUserStopped):
-            what = "robot reflex" if msg.robot_mode == lcmt_panda_status.kReflex else "robot user stop"
-            raise ReflexError(t, 0.0, self._tau.Eval(context), what)
+        if code in (STOP_ROBOT_REFLEX, STOP_USER_STOPPED):
+            what = "robot reflex" if code == STOP_ROBOT_REFLEX else "robot user stop"
+            return ReflexError(t, 0.0, context.get_discrete_state(self._stop_tau).get_value().copy(), what)
+        return None
+
+    def _check(self, context, discrete_state):
+        msg = self._status.Eval(context)
+        last_utime, seen, code, t_stop = context.get_discrete_state(self._state).get_value()
+        t = context.get_time()
+        if code:                                     # a stop holds until the next reset
+            return EventStatus.ReachedTermination(self, "the station stopped")
+        if msg.num_joints and float(msg.utime) != last_utime:
+            last_utime, seen = float(msg.utime), t
+        if t - seen > self._timeout:
+            code = STOP_STALE
+        elif msg.num_joints and msg.robot_mode in (lcmt_panda_status.kReflex, lcmt_panda_status.kUserStopped):
+            code = STOP_ROBOT_REFLEX if msg.robot_mode == lcmt_panda_status.kReflex else STOP_USER_STOPPED
+            discrete_state.set_value(self._stop_tau, np.asarray(self._tau.Eval(context), dtype=float))
+        discrete_state.set_value(self._state, np.array([last_utime, seen, code, t if code else 0.0]))
+        if code:
+            return EventStatus.ReachedTermination(self, "stale status" if code == STOP_STALE else "robot stop")
+        return EventStatus.Succeeded()
 
 
 class ForwardKinematics(LeafSystem):
@@ -639,6 +663,15 @@ class HardwareStation(Diagram):
     def hand_pose(self, q) -> RigidTransform:
         """X_WE, the ``ee_pose`` output's value, at joint positions q (7) [rad]."""
         return self._forward_kinematics.pose(np.asarray(q, dtype=float))
+
+    def stop_error(self, context) -> RuntimeError | None:
+        """The status monitor's stop (stale status, the robot's own reflex or user stop), else
+        the reflex monitor's trip, in ``context`` (a root context), as the typed error; or None."""
+        for monitor in (self.monitor, self.reflex_monitor):
+            error = monitor.stop_error(monitor.GetMyContextFromRoot(context))
+            if error is not None:
+                return error
+        return None
 
     def robot_scene_contact(self, context) -> tuple[float, np.ndarray]:
         """(contact force [N], external joint torques (7) [N m]) as the robot measures

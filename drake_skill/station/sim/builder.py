@@ -309,6 +309,10 @@ class Station(Diagram):
         self.plant.SetPositions(self._kinematics, self.panda, np.asarray(q, dtype=float))
         return self.plant.EvalBodyPoseInWorld(self._kinematics, self._hand_body) @ X_HAND_TCP
 
+    def stop_error(self, context) -> RuntimeError | None:
+        """The reflex monitor's trip in ``context`` (a root context) as a ReflexError, or None."""
+        return self.reflex_monitor.stop_error(self.reflex_monitor.GetMyContextFromRoot(context))
+
     def robot_scene_contact(self, context) -> tuple[float, np.ndarray]:
         """(sum of the robot-scene contact force magnitudes [N], external joint
         torques of joints 1..7 [N m]) at the state in ``context`` (a root context
