@@ -357,7 +357,10 @@ def cluster_grid(grid, cluster):
     out = cluster.folder / "grid"
     argv = _grid_argv(shared, out, cluster.address)
     record = before_path(out, "close")
-    tasks = lambda: cluster.call(op="running", name="execute_remote")["pids"]  # noqa: E731
+
+    def tasks() -> list[int]:
+        return cluster.call(op="running", name="execute_remote")["pids"]
+
     first = cluster.spawn(argv, "first")
     _until(record.is_file, "the held-out record is stored", lambda: cluster.wait(first, 0) is None)
     under_way = tasks()
