@@ -8,14 +8,15 @@
   the keys are pressed in the browser, as a person would.
 * ``run_report.png``: RUN/report.html, the learn run's report (``make demo``
   writes results/learn/open);
-* ``fit_report.png``: RUN/initial_skill/fit_report.html, the fit report of
-  the skill that run started from.
+* ``fit_report.png``: the fit report of Open's demonstrations recorded
+  afresh (``drake-skill demos record`` and ``fit``, in a temporary folder).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -93,7 +94,14 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     report(args.run / "report.html", args.out / "run_report.png")
-    report(args.run / "initial_skill" / "fit_report.html", args.out / "fit_report.png")
+    with tempfile.TemporaryDirectory() as tmp:
+        from drake_skill.cli.main import main as drake_skill
+
+        for command in (["demos", "record", "--skill", "open", "--out", f"{tmp}/demos", "--quiet"],
+                        ["fit", "--demos", f"{tmp}/demos", "--out", f"{tmp}/skill", "--skill", "open"]):
+            if drake_skill(command):
+                raise SystemExit(f"screenshots: drake-skill {' '.join(command)} failed")
+        report(Path(tmp) / "skill" / "fit_report.html", args.out / "fit_report.png")
     teleop_page(args.out)
     for name in ("teleop_page", "run_report", "fit_report"):
         print(f"wrote {args.out / name}.png")
