@@ -18,12 +18,17 @@ def quiet_differential_ik():
 
 #: Files whose tests share no expensive fixture and run long: spread test by test.
 SPREAD = ("test_physics.py", "test_notebooks.py")
+#: Files run one after the other on one worker: the hardware tests run two real-time
+#: simulators, and while test_experiment's Ray cluster of 3 nodes started beside them the
+#: simulated robot lagged real time (refinement 3.9 -> 5.4 mm RMS instead of -> ~2).
+SEQUENTIAL = ("test_hardware.py", "test_experiment.py")
 
 
 def pytest_xdist_make_scheduler(config, log):
     """Under pytest-xdist with ``--dist loadscope`` (``make test``), each test file runs on
     one worker, so its module fixtures (a fitted skill, a grid) are built once;
-    test_physics's long, independent checks and the notebooks spread over the workers.
+    test_physics's long, independent checks and the notebooks spread over the workers, and
+    the files of ``SEQUENTIAL`` share one worker.
 
     (A scheduler of our own, not ``xdist_group`` marks with ``--dist loadgroup``:
     pytest-xdist 3.8 groups by rewriting ``item._nodeid``, which pytest 9 no longer
@@ -36,6 +41,8 @@ def pytest_xdist_make_scheduler(config, log):
     class FileScopes(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             path = nodeid.split("::", 1)[0]
-            return nodeid if path.endswith(SPREAD) else path
+            if path.endswith(SPREAD):
+                return nodeid
+            return "real-time and Ray cluster" if path.endswith(SEQUENTIAL) else path
 
     return FileScopes(config, log)

@@ -27,6 +27,7 @@ the same run, so the table is the same.
 
 from __future__ import annotations
 
+import atexit
 import dataclasses as dc
 import hashlib
 import os
@@ -82,9 +83,11 @@ _COPIES: dict[str, Path] = {}
 
 
 def _skill_copy(key: str, skills: SkillFiles) -> Path:
-    """This worker's copy of skill ``key`` (written once per worker process)."""
+    """This worker's copy of skill ``key`` (written once per worker process, removed when the
+    process exits normally; a killed worker leaves it to the node's temporary-file cleanup)."""
     if key not in _COPIES or not (_COPIES[key] / "skill.json").is_file():
         folder = Path(tempfile.mkdtemp(prefix=f"drake_skill_{key}_"))
+        atexit.register(shutil.rmtree, folder, True)
         _COPIES[key] = unpack_folder(skills[key], folder)
     return _COPIES[key]
 

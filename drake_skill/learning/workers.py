@@ -358,6 +358,8 @@ class _RayWorkerImpl:
     (written into the actor's own temporary folder: no node needs the driver's disk)."""
 
     def __init__(self, spec: RunnerSpec, skill_files: dict[str, bytes]):
+        import atexit
+        import shutil
         import tempfile
 
         from drake_skill.fileio import unpack_folder
@@ -367,6 +369,7 @@ class _RayWorkerImpl:
         if spec.quiet_ik:
             _quiet_ik()
         folder = unpack_folder(skill_files, tempfile.mkdtemp(prefix="drake_skill_skill_"))
+        atexit.register(shutil.rmtree, folder, True)     # the actor's copy goes with its process
         self._runner = dc.replace(spec, skill_dir=str(folder)).build()
 
     def run(self, weights, seed):
