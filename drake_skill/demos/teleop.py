@@ -392,11 +392,7 @@ class TeleopSession:
         demonstration that pressed near the reflex's limit gets a ``warning:``
         status line (``drake_skill.demos.force_margin``).
         """
-        from drake_skill.demos.format import MIN_SAMPLES
-        from drake_skill.demos.demonstrator import demonstration_from
         from drake_skill.demos.force_margin import margin_warnings
-        from drake_skill.station.recording import StationRecorder
-        from drake_skill.station.success import judge_run, verdict_why
 
         config = self.config
         X_WO = self.reset(seed)
@@ -404,20 +400,39 @@ class TeleopSession:
         status(f"[{self.skill}, seed {seed}] drive the hand to the start, then press "
                f"{RECORD_BUTTON} (within {config.max_wait:.0f} s); {STOP_BUTTON} ends the demonstration "
                f"(it stops by itself after {config.max_duration:.0f} s)")
-        # Idle: the same loop (reflex, solver and divergence checks), nothing kept.
-        idle = StationRecorder(self.station, self.context, self.simulator, 1.0 / config.period)
+        self._wait_for_record(user)
+        recorder, t_start = self._record_until_stop(user, status)
+        demo, why = self._demonstration(recorder, seed, X_WO, t_start)
+        status(f"recorded {demo.duration:.1f} s: {'success' if demo.success else 'FAILURE'} ({why})")
+        for message in margin_warnings(demo, self.station.config.reflex, f"this demonstration (seed {seed})"):
+            status(f"warning: {message}")
+        return demo
+
+    def _wait_for_record(self, user) -> None:
+        """Idle until Record: the same loop as a recording (reflex, solver and divergence
+        checks), nothing kept; TimeoutError after ``max_wait`` s."""
+        from drake_skill.station.recording import StationRecorder
+
+        idle = StationRecorder(self.station, self.context, self.simulator, 1.0 / self.config.period)
         idle.anchor()
         while self.mode() == IDLE:
             t = self.context.get_time()
             self._show()
-            if t > config.max_wait:
-                raise TimeoutError(f"{RECORD_BUTTON} was not pressed within {config.max_wait} s")
+            if t > self.config.max_wait:
+                raise TimeoutError(f"{RECORD_BUTTON} was not pressed within {self.config.max_wait} s")
             if user is not None:
                 user(t)
             idle.sample()
             if idle.n_samples > 1000:
                 idle.reset()
                 idle.anchor()
+
+    def _record_until_stop(self, user, status):
+        """Records at 100 Hz (frames at 10 Hz) until Stop or ``max_duration``, on a frame and
+        for at least MIN_SAMPLES frames; returns (the recorder, its start time [s])."""
+        from drake_skill.demos.format import MIN_SAMPLES
+        from drake_skill.station.recording import StationRecorder
+
         recorder = StationRecorder(self.station, self.context, self.simulator, 100.0, 10.0, self.segmenter)
         t_start = recorder.anchor()
         status(f"recording from t = {t_start:.2f} s")
@@ -429,24 +444,26 @@ class TeleopSession:
                 user(recorder.next_time())
             recorder.sample(float(gripper.Eval(teleop_context)[0]))
             self._show(t_start)
-            done = self.mode() == DONE or recorder.next_time() - t_start > config.max_duration
+            done = self.mode() == DONE or recorder.next_time() - t_start > self.config.max_duration
             if done and recorder.at_frame and recorder.n_samples >= min_raw:
-                break
+                return recorder, t_start
+
+    def _demonstration(self, recorder, seed: int, X_WO, t_start: float):
+        """(the Demonstration of a finished recording, why its verdict); the page shows the verdict."""
+        from drake_skill.demos.demonstrator import demonstration_from
+        from drake_skill.station.success import judge_run, verdict_why
+
         rule = self.station.config.success
         success = judge_run(recorder.times, recorder.obj, recorder.force, rule)
         why = verdict_why(recorder.times, recorder.obj, recorder.force, rule)
-        metadata = {"source": "interactive", "teleop_config": dc.asdict(config),
+        metadata = {"source": "interactive", "teleop_config": dc.asdict(self.config),
                     "recording_started_at_s": t_start,
                     "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
         if self.page is not None and self.page.note:
             metadata["note"] = self.page.note
-        demo = demonstration_from(recorder, self.skill, seed, X_WO, success, metadata)
         if self.page is not None:
             self.page.publish(mode="done", last_verdict="success" if success else "failure", last_why=why)
-        status(f"recorded {demo.duration:.1f} s: {'success' if success else 'FAILURE'} ({why})")
-        for message in margin_warnings(demo, self.station.config.reflex, f"this demonstration (seed {seed})"):
-            status(f"warning: {message}")
-        return demo
+        return demonstration_from(recorder, self.skill, seed, X_WO, success, metadata), why
 
 
 KEY_LEGEND = ("W/S x, A/D y, E/Q z\nL/J roll, I/K pitch, O/U yaw\nX/Z gripper open/close\n"
