@@ -459,9 +459,9 @@ class TeleopSession:
         metadata = {"source": "interactive", "teleop_config": dc.asdict(self.config),
                     "recording_started_at_s": t_start,
                     "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
-        if self.page is not None and self.page.note:
-            metadata["note"] = self.page.note
         if self.page is not None:
+            if self.page.note:
+                metadata["note"] = self.page.note
             self.page.publish(mode="done", last_verdict="success" if success else "failure", last_why=why)
         return demonstration_from(recorder, self.skill, seed, X_WO, success, metadata), why
 

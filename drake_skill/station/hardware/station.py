@@ -214,7 +214,7 @@ class StatusMonitor(LeafSystem):
 
     def _check(self, context, discrete_state):
         msg = self._status.Eval(context)
-        last_utime, seen, code, t_stop = context.get_discrete_state(self._state).get_value()
+        last_utime, seen, code, _ = context.get_discrete_state(self._state).get_value()
         t = context.get_time()
         if code:                                     # a stop holds until the next reset
             return EventStatus.ReachedTermination(self, "the station stopped")
