@@ -100,7 +100,7 @@ def _unknown_key(field: str, key: str, valid) -> str:
     import difflib
 
     near = difflib.get_close_matches(key, list(valid), n=1)
-    return (f"field '{field or '(top level)'}': unknown key '{key}'; valid keys: {', '.join(valid)}"
+    return (f"field '{field or '(top level)'}': unknown key '{key}'; valid keys: {', '.join(valid) or '(none)'}"
             + (f"; did you mean '{near[0]}'?" if near else ""))
 
 
@@ -126,7 +126,9 @@ def _check(kind, value, field: str) -> str | None:
     origin, args = typing.get_origin(kind), typing.get_args(kind)
     if origin is typing.Union:
         options = [a for a in args if a is not type(None)]
-        return _check(options[0], value, field) if len(options) == 1 else None
+        if len(options) == 1:
+            return _check(options[0], value, field)
+        return _check_variant(options, value, field)
     if origin in (list, tuple) and isinstance(value, list) and args:
         for i, item in enumerate(value):
             found = _check(args[0], item, f"{field}[{i}]")
@@ -151,6 +153,25 @@ def _check(kind, value, field: str) -> str | None:
         if found:
             return found
     return None
+
+
+def _check_variant(options, value, field: str) -> str | None:
+    """The first problem of ``value`` against a union of config types, chosen by its YAML tag
+    (``!Name``) as Drake chooses: an untagged value is the first option. None for unions of
+    other types (scalars), which Drake's own message describes."""
+    if not all(_fields(o) is not None for o in options) or not isinstance(value, dict):
+        return None
+    names = {o.__name__: o for o in options}
+    tag = value.get("__tag__")
+    if tag is not None and tag not in names:
+        return (f"field '{field}': unknown type '!{tag}'; valid types: "
+                + ", ".join(f"!{n}" for n in names))
+    chosen = names[tag] if tag is not None else options[0]
+    found = _check(chosen, {k: v for k, v in value.items() if k != "__tag__"}, field)
+    if found and tag is None:
+        found += (f" (an untagged '{field}' is a !{chosen.__name__}; for another type write its tag, "
+                  + " or ".join(f"'{field}: !{n} {{...}}'" for n in list(names)[1:]) + ")")
+    return found
 
 
 def _diagnose(schema, text: str | None) -> str | None:

@@ -144,3 +144,19 @@ def _bad_scenario(tmp_path, capsys, edit, expected, end):
     err = capsys.readouterr().err.strip()
     assert code == 2 and "\n" not in err and "Traceback" not in err
     assert f"station config ({scenario}): {expected}" in err and err.endswith(end), err
+
+
+@pytest.mark.parametrize("edit, expected, end", [
+    (("plant:", "driver: !PandaDriver {lcm_url: memq://}\nplant:"), "field 'driver': unknown type '!PandaDriver'; ",
+     "valid types: !EndEffectorDriver, !JointSetpointDriver, !PandaLcmDriver"),
+    (("plant:", "driver: {lcm_url: memq://}\nplant:"), "field 'driver': unknown key 'lcm_url'; valid keys: (none) ",
+     "or 'driver: !PandaLcmDriver {...}')"),
+    (("add_model: {name: drawer,", "add_model: {name: cabinet,"),
+     "station config field 'object.model' = 'drawer': expected the name of a model the directives add ",
+     "(cabinet, panda, panda_hand, table)"),
+])
+def test_a_scenario_naming_an_unknown_driver_or_instance_is_one_line_naming_the_file(tmp_path, capsys, edit,
+                                                                                      expected, end):
+    """The driver is a scenario field (issue 46 item 2): an unknown type tag, or an untagged driver
+    with another type's keys; and an object instance the directives do not add."""
+    _bad_scenario(tmp_path, capsys, edit, expected, end)

@@ -173,14 +173,14 @@ def test_a_kinesthetic_recording_is_warned_by_its_external_torques():
     """The hardware station as ``hardware record-demo`` wires it (nothing commanded), fed the
     driver's status by hand: joint 4's external torque rises to 70 % of its 27 N m limit
     at 0.5 s. The recorder keeps the filtered torque's peak and time; the warning names them."""
-    from drake_skill.station.hardware.config import HardwareConfig
+    from drake_skill.station.drivers import PandaLcmDriver
     from drake_skill.station.hardware.station import build_hardware_station
     from drake_skill.station.pose_source import PoseTrajectorySource, hold_plan
     from drake_skill.station.recording import StationRecorder
 
-    config = HardwareConfig(lcm_url="memq://", ground_truth_channel="SIM_OBJECT_STATE")
-    config.station = scenario_for_skill("close")
-    config.station.enable_camera = False
+    config = scenario_for_skill("close")
+    config.driver = PandaLcmDriver(lcm_url="memq://", ground_truth_channel="SIM_OBJECT_STATE")
+    config.enable_camera = False
     lcm = DrakeLcm("memq://")
     builder = DiagramBuilder()
     station = builder.AddNamedSystem("station", build_hardware_station(config, lcm=lcm, commanding=False))
@@ -190,21 +190,21 @@ def test_a_kinesthetic_recording_is_warned_by_its_external_torques():
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     simulator = Simulator(diagram, context)
-    q = config.station.q_home
-    limit = config.station.reflex.external_torque_max[3]
+    q = config.q_home
+    limit = config.reflex.external_torque_max[3]
 
     def publish(t):
         tau = np.zeros(7)
         tau[3] = -0.7 * limit * min(max((t - 0.3) / 0.2, 0.0), 1.0) if t < 0.8 else 0.0   # -18.9 N m, 0.5-0.8 s
-        lcm.Publish(config.status_channel, _status(q, tau, int(1e6 * t) + 1).encode())
+        lcm.Publish(config.driver.status_channel, _status(q, tau, int(1e6 * t) + 1).encode())
         scope = lcmt_scope()
         scope.utime, scope.size, scope.value = int(1e6 * t) + 1, 1, [0.1]
-        lcm.Publish(config.ground_truth_channel, scope.encode())
+        lcm.Publish(config.driver.ground_truth_channel, scope.encode())
 
     publish(0.0)
     X_WO = station.reset(context, 0)
     X_WE = station.GetOutputPort("ee_pose").Eval(station.GetMyContextFromRoot(context))
-    hold.set_plan(hold.GetMyMutableContextFromRoot(context), hold_plan(X_WE, config.station.gripper_home))
+    hold.set_plan(hold.GetMyMutableContextFromRoot(context), hold_plan(X_WE, config.gripper_home))
     simulator.Initialize()
     recorder = StationRecorder(station, context, simulator, 100.0, 10.0)
     recorder.anchor()
@@ -217,7 +217,7 @@ def test_a_kinesthetic_recording_is_warned_by_its_external_torques():
     # The filtered torque (10 ms time constant) follows the 0.2 s ramp within 2 %.
     assert meta["peak_external_torque_Nm"][3] == pytest.approx(0.7 * limit, rel=0.02)
     assert 0.5 <= meta["peak_external_torque_time_s"][3] <= 0.8
-    (message,) = margin_warnings(demo, config.station.reflex, "demos/close/demo_003.npz")
+    (message,) = margin_warnings(demo, config.reflex, "demos/close/demo_003.npz")
     match = re.fullmatch(rf"demos/close/demo_003\.npz: external torque of joint 4 peaks at {NUMBER} N m at t = "
                          rf"{NUMBER} s, (\d+) % of the reflex limit {limit:g} N m \(warned above 60 %\); demonstrate "
                          rf"with a lighter touch, or the imitation and exploration will trip the reflex at "

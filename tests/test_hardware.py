@@ -38,7 +38,8 @@ from drake_skill.station.sim.builder import build_station
 from drake_skill.skills import scenario_for_skill
 from drake_skill.station.hardware.station import (STATUS_CHECK_PERIOD, ReflexError, StaleStatusError, StatusMonitor,
                                           build_hardware_station)
-from drake_skill.station.hardware.config import HardwareConfig, load_hardware_config
+from drake_skill.station.config import load_station_config
+from drake_skill.station.drivers import PandaLcmDriver
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource
 from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.sim.lcm_robot import DriverProtocolError, SimRobot
@@ -56,9 +57,9 @@ def _scenario(skill="draw", camera=False):
 
 
 def _hardware_config(station_config):
-    config = HardwareConfig(lcm_url="memq://")
-    config.station = station_config
-    return config
+    """The scenario with the Panda's LCM driver on an in-process (``memq://``) LCM."""
+    station_config.driver = PandaLcmDriver(lcm_url="memq://")
+    return station_config
 
 
 @pytest.mark.parametrize("camera", [False, True])
@@ -135,8 +136,8 @@ def test_greedy_policy_on_the_simulated_robot_matches_direct_simulation(draw_ski
     # safety test below checks; and no reflex (tested on its own below): when
     # the simulated robot falls behind real time it tracks the commands with
     # larger errors and presses harder than the direct simulation.
-    hardware_config.status_timeout = 0.3
-    hardware_config.station.reflex.enabled = False
+    hardware_config.driver.status_timeout = 0.3
+    hardware_config.reflex.enabled = False
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
     runner = RolloutRunner(model, config=rollout, station=build_hardware_station(hardware_config, lcm=lcm))
     robot.start(seed=5)
@@ -178,11 +179,11 @@ def test_a_learning_run_on_the_simulated_robot(tmp_path, tmp_path_factory):
 
     shared = shared_skill(tmp_path_factory)
     hardware_config = _hardware_config(copy.deepcopy(shared["station"]))
-    hardware_config.status_timeout = 0.3          # two real-time simulators in one process (see above)
+    hardware_config.driver.status_timeout = 0.3          # two real-time simulators in one process (see above)
     # The loop on the robot is under test here, not the reflex (tested above and
     # below): on a loaded machine the simulated robot lags the commands and
     # presses the lid harder than the direct simulation does.
-    hardware_config.station.reflex.enabled = False
+    hardware_config.reflex.enabled = False
     lcm = DrakeLcm("memq://")
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
     runner = RolloutRunner(Skill.load(shared["skill_dir"]), config=rollout_config(),
@@ -191,7 +192,7 @@ def test_a_learning_run_on_the_simulated_robot(tmp_path, tmp_path_factory):
     try:
         outcome = learn(shared["skill_dir"], tmp_path / "learn", LearnConfig(episodes=1, rollouts=2, held_out=0,
                                                                              select_poses=1),
-                        station_config=hardware_config.station, rollout_config=rollout_config(), runner=runner,
+                        station_config=hardware_config, rollout_config=rollout_config(), runner=runner,
                         replay=False, progress=False, log=open(os.devnull, "w"))
     finally:
         robot.stop()
@@ -241,8 +242,8 @@ def test_refinement_on_the_simulated_robot_brings_its_path_to_the_demonstration(
                            path="free_move")
 
     hardware_config = _hardware_config(station_config)
-    hardware_config.status_timeout = 0.3           # two real-time simulators in one process (see above)
-    hardware_config.station.reflex.enabled = False
+    hardware_config.driver.status_timeout = 0.3           # two real-time simulators in one process (see above)
+    hardware_config.reflex.enabled = False
     lcm = DrakeLcm("memq://")
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
     station = build_hardware_station(hardware_config, lcm=lcm)
@@ -319,7 +320,7 @@ def _harness(hardware_config, lcm, recorder=None):
     builder.Connect(source.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
     builder.Connect(source.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))
     if recorder is not None:
-        builder.AddSystem(LcmSubscriberSystem(hardware_config.command_channel, recorder, lcm))
+        builder.AddSystem(LcmSubscriberSystem(hardware_config.driver.command_channel, recorder, lcm))
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     simulator = Simulator(diagram, context)
@@ -334,7 +335,7 @@ def test_jump_is_rate_limited_clipped_and_stale_status_stops_the_station():
     recorder = _Recorder(lcmt_panda_command)
     station, source, context, simulator = _harness(hardware_config, lcm, recorder)
     commands = recorder.messages
-    y_max = hardware_config.workspace.upper[1]
+    y_max = hardware_config.driver.workspace.upper[1]
     robot.start()
     try:
         station.reset(context)
@@ -356,7 +357,7 @@ def test_jump_is_rate_limited_clipped_and_stale_status_stops_the_station():
         robot.stop()
     for _ in range(20):
         lcm.HandleSubscriptions(1)                # what is still queued
-    period = hardware_config.command_period
+    period = hardware_config.driver.command_period
 
     # The first command is the measured position.
     q = np.array([c.joint_position for c in commands])
@@ -377,9 +378,10 @@ def test_jump_is_rate_limited_clipped_and_stale_status_stops_the_station():
     # Stale status: caught within the configured time, commanding stopped there.
     error = stale.value
     age = error.detected_at - error.last_seen
-    assert hardware_config.status_timeout < age <= hardware_config.status_timeout + STATUS_CHECK_PERIOD + 1e-9
+    timeout = hardware_config.driver.status_timeout
+    assert timeout < age <= timeout + STATUS_CHECK_PERIOD + 1e-9
     last_command_time = (len(commands) - 1) * period
-    assert error.last_seen + hardware_config.status_timeout - period <= last_command_time
+    assert error.last_seen + timeout - period <= last_command_time
     assert last_command_time <= error.detected_at + 1e-9
     assert all(c.utime > 1e15 for c in commands[:: max(1, len(commands) // 20)])   # wall clock [us]
     assert abs(commands[-1].utime - time.time() * 1e6) < 5e6
@@ -391,7 +393,7 @@ def test_pressing_into_the_table_trips_the_shared_reflex():
     from drake_skill.station.recording import record_station
 
     hardware_config = _hardware_config(_scenario("open"))
-    hardware_config.workspace.lower[2] = -0.3          # let the command go below the table top
+    hardware_config.driver.workspace.lower[2] = -0.3          # let the command go below the table top
     lcm = DrakeLcm("memq://")
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
     station, source, context, simulator = _harness(hardware_config, lcm)
@@ -407,14 +409,14 @@ def test_pressing_into_the_table_trips_the_shared_reflex():
             record_station(simulator, station, context, 0.0, 400, 100.0)
     finally:
         robot.stop()
-    limit = np.asarray(hardware_config.station.reflex.external_torque_max)
+    limit = np.asarray(hardware_config.reflex.external_torque_max)
     assert np.any(np.abs(reflex.value.torque_Nm) > limit)
     assert 0.2 < reflex.value.time_s < 4.0
 
 
 def test_reset_without_a_robot_says_what_to_check():
     hardware_config = _hardware_config(_scenario("open"))
-    hardware_config.reset_timeout = 0.2
+    hardware_config.driver.reset_timeout = 0.2
     station = build_hardware_station(hardware_config, lcm=DrakeLcm("memq://"))
     with pytest.raises(StaleStatusError, match="no robot status within 0.2 s.*driver"):
         station.reset(station.CreateDefaultContext(), 0)
@@ -464,13 +466,13 @@ def test_measured_external_torque_goes_to_the_shared_reflex_check():
     station = build_hardware_station(hardware_config, lcm=lcm)
     context = station.CreateDefaultContext()
     msg = _status()
-    msg.joint_position = list(hardware_config.station.q_home)
+    msg.joint_position = list(hardware_config.q_home)
     msg.joint_torque_external = [0.0, 0.0, 0.0, 41.0, 0.0, 0.0, -3.0]
-    lcm.Publish(hardware_config.status_channel, msg.encode())
+    lcm.Publish(hardware_config.driver.status_channel, msg.encode())
     station.reset(context, 0)
     force, tau = station.robot_scene_contact(context)
     assert force == 0.0 and np.array_equal(tau, msg.joint_torque_external)
-    np.testing.assert_allclose(station.GetOutputPort("panda_state").Eval(context)[:7], hardware_config.station.q_home)
+    np.testing.assert_allclose(station.GetOutputPort("panda_state").Eval(context)[:7], hardware_config.q_home)
 
 
 def test_first_command_is_the_measured_position_of_a_robot_away_from_home():
@@ -481,11 +483,11 @@ def test_first_command_is_the_measured_position_of_a_robot_away_from_home():
     lcm = DrakeLcm("memq://")
     recorder = _Recorder(lcmt_panda_command)
     station, source, context, simulator = _harness(hardware_config, lcm, recorder)
-    q_home = np.asarray(hardware_config.station.q_home)
+    q_home = np.asarray(hardware_config.q_home)
     q_measured = q_home + [0.3, -0.2, 0.15, 0.25, -0.2, 0.3, -0.4]
     msg = _status()
     msg.joint_position = list(q_measured)
-    lcm.Publish(hardware_config.status_channel, msg.encode())     # the robot's one status: no SimRobot
+    lcm.Publish(hardware_config.driver.status_channel, msg.encode())     # the robot's one status: no SimRobot
     station.reset(context, 0)
     station_context = station.GetMyContextFromRoot(context)
     X0 = station.GetOutputPort("ee_pose").Eval(station_context)
@@ -528,16 +530,15 @@ def test_camera_over_lcm_gives_the_object_pose():
 
 
 def test_simulated_driver_drops_old_commands_and_refuses_wrong_modes():
-    hardware_config = HardwareConfig(lcm_url="memq://")
-    hardware_config.station = _scenario("open")
+    hardware_config = _hardware_config(_scenario("open"))
     robot = SimRobot(hardware_config)            # its own memq:// DrakeLcm, handled by its own thread
     robot.start()
 
     def command(utime, mode=lcmt_panda_status.CONTROL_MODE_POSITION):
         msg = lcmt_panda_command()
         msg.utime, msg.control_mode_expected = utime, mode
-        msg.num_joint_position, msg.joint_position = 7, list(hardware_config.station.q_home)
-        robot.lcm.Publish(hardware_config.command_channel, msg.encode())
+        msg.num_joint_position, msg.joint_position = 7, list(hardware_config.q_home)
+        robot.lcm.Publish(hardware_config.driver.command_channel, msg.encode())
         time.sleep(0.1)
 
     command(int(time.time() * 1e6) - 1_000_000)  # 1 s old: dropped
@@ -549,15 +550,15 @@ def test_simulated_driver_drops_old_commands_and_refuses_wrong_modes():
     assert robot.command_counts() == (1, 1)
 
 
-def test_hardware_config_errors_name_the_field():
-    with pytest.raises(ValueError, match="status_timeout"):
-        load_hardware_config(data="status_timeout: 0.0")
-    with pytest.raises(ValueError, match="workspace"):
-        load_hardware_config(data="workspace: {lower: [0, 0, 0], upper: [1, -1, 1]}")
+def test_driver_errors_name_the_field():
+    with pytest.raises(ValueError, match=r"field 'driver.status_timeout' = 0.0"):
+        load_station_config(data="driver: !PandaLcmDriver {status_timeout: 0.0}")
+    with pytest.raises(ValueError, match=r"field 'driver.workspace.lower/upper'"):
+        load_station_config(data="driver: !PandaLcmDriver {workspace: {lower: [0, 0, 0], upper: [1, -1, 1]}}")
     with pytest.raises(ValueError, match="status_chanel"):
-        load_hardware_config(data="status_chanel: X")
-    config = load_hardware_config(data="lcm_url: memq://\ncommand_channel: FRANKA_CMD")
-    assert config.command_channel == "FRANKA_CMD" and config.status_channel == "PANDA_STATUS"
+        load_station_config(data="driver: !PandaLcmDriver {status_chanel: X}")
+    config = load_station_config(data="driver: !PandaLcmDriver {lcm_url: memq://, command_channel: FRANKA_CMD}")
+    assert config.driver.command_channel == "FRANKA_CMD" and config.driver.status_channel == "PANDA_STATUS"
 
 
 # --------------------------------------------------------------------------- across processes
@@ -588,14 +589,14 @@ def test_hardware_cli_against_sim_robot_in_another_process(tmp_path, tmp_path_fa
     from drake_skill.demos.format import load_demonstration
 
     skill_dir = shared_skill(tmp_path_factory)["skill_dir"]
-    config = HardwareConfig(lcm_url=UDP_URL)
-    config.station = small_station("close")       # 160 x 120 camera: small image messages
+    config = small_station("close")               # 160 x 120 camera: small image messages
+    config.driver = PandaLcmDriver(lcm_url=UDP_URL)
     # Two processes with real-time simulators and a PCAE on 2 shared cores: the
     # robot's status may stall longer than the default 100 ms (a real driver
     # runs on its own real-time computer); stale status is tested in-process.
-    config.status_timeout = 0.5
-    config.station.reflex.enabled = False         # as in the learning-run test: the protocol is under test
-    config.reset_timeout = 120.0                  # record-demo waits for the robot it starts before
+    config.driver.status_timeout = 0.5
+    config.reflex.enabled = False         # as in the learning-run test: the protocol is under test
+    config.driver.reset_timeout = 120.0                  # record-demo waits for the robot it starts before
     (tmp_path / "hardware.yaml").write_text(yaml_dump_typed(config))
     cli = f"{sys.executable} -m drake_skill.cli.main"
     robot = f"{cli} sim-robot --config hardware.yaml --skill close --seed 7 --duration 120"
@@ -637,3 +638,31 @@ def test_hardware_cli_against_sim_robot_in_another_process(tmp_path, tmp_path_fa
     assert [d.seed for d in load_demonstrations(tmp_path / "demos", skill="close")] == [7]
     travel = np.sum(np.linalg.norm(np.diff(demo.X_OE_100hz[:, :3], axis=0), axis=1))
     assert travel > 0.05, f"the guided hand moved {travel:.3f} m"
+
+
+def test_one_factory_builds_each_driver_and_every_port_carries_what_its_name_says():
+    """make_station dispatches on the scenario's driver (issue 46 item 2): the hand pose in, or
+    the joint set points in (the simulated robot's), never one under the other's name; the robot
+    needs a !PandaLcmDriver, and says so in one line."""
+    from drake_skill.station.drivers import JointSetpointDriver
+    from drake_skill.station.make import make_station
+
+    config = _scenario("open")
+    end_effector = make_station(config)
+    assert end_effector.GetInputPort("ee_pose_desired").get_data_type().name == "kAbstractValued"
+    assert not end_effector.HasInputPort("panda_state_desired")
+    config.driver = JointSetpointDriver()
+    joints = make_station(config)
+    assert joints.GetInputPort("panda_state_desired").size() == 14 and not joints.HasInputPort("ee_pose_desired")
+    assert joints.ee_controller is None and not joints.HasOutputPort("joint_acceleration_commanded")
+    # The set points reach the arm's joint impedance unchanged.
+    context = joints.CreateDefaultContext()
+    joints.reset(context, None)
+    q = np.asarray(config.q_home) + 0.1
+    joints.GetInputPort("panda_state_desired").FixValue(context, np.r_[q, np.zeros(7)])
+    plant_context = joints.plant.GetMyContextFromRoot(context)
+    np.testing.assert_allclose(joints.plant.get_desired_state_input_port(joints.panda).Eval(plant_context)[:7], q)
+    with pytest.raises(ValueError, match=r"^station config: field 'driver' = !JointSetpointDriver: the hardware "
+                                         r"station speaks the Panda driver's LCM protocol; give the scenario driver: "
+                                         r"!PandaLcmDriver \{\.\.\.\}"):
+        make_station(config, hardware=True)

@@ -81,16 +81,16 @@ def test_hardware_and_simulation_stations_stand_apart():
     """station/hardware never imports station/sim: the hardware port runs without the
     simulated station; both build on the shared station modules (issue 29 item 6)."""
     hardware = _station_imports("hardware")
-    assert "station.py" in hardware and "config.py" in hardware
+    assert "station.py" in hardware
     for name, imported in hardware.items():
         assert not any(m.startswith("drake_skill.station.sim") for m in imported), (name, imported)
     simulated = _station_imports("sim")
     assert {"builder.py", "simulation.py", "lcm_robot.py"} <= set(simulated)
-    # The simulated station itself needs nothing of the hardware port; only the
-    # simulated robot behind the driver's protocol reads the hardware config's channels.
-    for name in ("builder.py", "simulation.py"):
+    # Neither needs the hardware port: the driver's channels are the scenario's (station.drivers),
+    # and the simulated robot builds its own station through the one factory.
+    for name in ("builder.py", "simulation.py", "lcm_robot.py"):
         assert not any(m.startswith("drake_skill.station.hardware") for m in simulated[name]), name
-    assert any(m.startswith("drake_skill.station.hardware.config") for m in simulated["lcm_robot.py"])
+    assert "drake_skill.station.make" in simulated["lcm_robot.py"]
 
 
 def _imported_modules(path: Path) -> set[str]:

@@ -1,11 +1,11 @@
 """``drake-skill hardware``: a skill on a real Panda through the drake-franka-driver's LCM.
 
-    drake-skill hardware run --skill-dir DIR [--lcm-url URL] [--config hardware.yaml]
+    drake-skill hardware run --skill-dir DIR [--lcm-url URL] [--config scenario.yaml]
                              [--rollouts 1] [--seed0 0] [--episodes E] [--out DIR] [--yes]
-    drake-skill hardware record-demo --skill open --out DIR [--lcm-url URL] [--config hardware.yaml]
+    drake-skill hardware record-demo --skill open --out DIR [--lcm-url URL] [--config scenario.yaml]
                              [--duration 15] [--seed 0] [--yes]
     drake-skill hardware refine --skill-dir DIR --demos DIR [--iterations 1] [--out DIR]
-                             [--lcm-url URL] [--config hardware.yaml] [--yes]
+                             [--lcm-url URL] [--config scenario.yaml] [--yes]
 
 The same diagram as in simulation, with the simulated station swapped for
 the hardware station (``drake_skill.station.hardware.station``): position commands
@@ -100,7 +100,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     refine_p.add_argument("--force", action="store_true", help="replace a skill already in --out")
     for p in (run_p, demo_p, refine_p):
         p.add_argument("--lcm-url", default=None, help="LCM URL (default: the config's, or LCM's default)")
-        p.add_argument("--config", type=Path, help="HardwareConfig YAML (channels, URL, workspace, scenario)")
+        p.add_argument("--config", type=Path, metavar="SCENARIO",
+                       help="a scenario YAML laid over the skill's: driver: !PandaLcmDriver {channels, URL, "
+                            "timeouts, workspace}, camera, object...")
         p.add_argument("--yes", action="store_true", help="do not wait for Enter before each rollout")
 
 
@@ -126,7 +128,7 @@ def _run(args) -> int:
     from drake_skill.fileio import atomic_write_json
     from drake_skill.learning.rollout import RolloutRunner
     from drake_skill.skill import Skill
-    from drake_skill.station.hardware.station import build_hardware_station
+    from drake_skill.station.make import make_station
 
     if args.rollouts < 1:
         raise ValueError(f"--rollouts must be at least 1, got {args.rollouts}")
@@ -137,20 +139,21 @@ def _run(args) -> int:
                                  "give a skill folder (drake-skill fit --out)")
     skill = Skill.load(args.skill_dir)
     config = load_config(args.config, args.lcm_url, skill.name)
-    camera = config.station.enable_camera
+    camera = config.enable_camera
     rollout = options.rollout_config(args, camera=camera)
     out = args.out if args.out is not None else args.skill_dir / "hardware_run"
-    station = build_hardware_station(config)
+    station = make_station(config, hardware=True)
     station.set_reset_hook(_prompt(not args.yes))
     runner = RolloutRunner(skill, config=rollout, station=station)
-    print(f"hardware station on {config.lcm_url or '(LCM default)'}: status {config.status_channel}, "
-          f"commands {config.command_channel}" + (f", camera {config.camera_channel}" if camera else ""))
+    driver = config.driver
+    print(f"hardware station on {driver.lcm_url or '(LCM default)'}: status {driver.status_channel}, "
+          f"commands {driver.command_channel}" + (f", camera {driver.camera_channel}" if camera else ""))
     if args.episodes:
         from drake_skill.learning.loop import LearnConfig, learn
 
         outcome = learn(args.skill_dir, out, LearnConfig(episodes=args.episodes, rollouts=args.rollouts,
                                                      seed=args.seed0, held_out=0),
-                        station_config=config.station, rollout_config=rollout, runner=runner, replay=False)
+                        station_config=config, rollout_config=rollout, runner=runner, replay=False)
         print(f"wrote {out} ({outcome!r:.200})")
         return 0
     results = []
@@ -167,7 +170,7 @@ def _run(args) -> int:
             print("stopped: the robot's status stopped or its reflex fired", file=sys.stderr)
             break
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_json(out / "hardware_run.json", {"skill": str(args.skill_dir), "lcm_url": config.lcm_url,
+    atomic_write_json(out / "hardware_run.json", {"skill": str(args.skill_dir), "lcm_url": config.driver.lcm_url,
                                                   "rollouts": results})
     print(f"wrote {out / 'hardware_run.json'}")
     return 0 if results and not any(r["failed"] for r in results) else 1
@@ -183,7 +186,7 @@ def _record_demo(args) -> int:
     from drake_skill.cli.sim_robot import load_config
     from drake_skill.demos.demonstrator import demonstration_from
     from drake_skill.demos.format import append_demonstration, existing_demo_files, load_demonstrations
-    from drake_skill.station.hardware.station import build_hardware_station
+    from drake_skill.station.make import make_station
     from drake_skill.station.pose_source import PoseTrajectorySource, hold_plan
     from drake_skill.station.recording import StationRecorder, advance_station
 
@@ -195,16 +198,16 @@ def _record_demo(args) -> int:
     if existing_demo_files(args.out):   # a set that does not load (mixed, other skill) is refused before recording
         load_demonstrations(args.out, skill=skill_name)
     config = load_config(args.config, args.lcm_url, args.skill, camera=not args.no_camera)
-    if not config.ground_truth_channel:
+    if not config.driver.ground_truth_channel:
         raise ValueError("record-demo needs the object's state over time: set ground_truth_channel "
                          "(a sensor on the hinge/slide, or sim-robot, publishes lcmt_scope there)")
     builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", build_hardware_station(config, commanding=False))
+    station = builder.AddNamedSystem("station", make_station(config, hardware=True, commanding=False))
     hold = builder.AddNamedSystem("hold", PoseTrajectorySource())   # unused: nothing is commanded
     builder.Connect(hold.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
     builder.Connect(hold.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))
     segmenter = None
-    if config.station.enable_camera:
+    if config.enable_camera:
         from drake_skill.perception.systems import add_object_segmenter
         segmenter = add_object_segmenter(builder, station)
     diagram = builder.Build()
@@ -214,15 +217,15 @@ def _record_demo(args) -> int:
     station.set_reset_hook(_prompt(not args.yes))
     X_WO_placed = station.reset(context, args.seed)
     X_WE = station.GetOutputPort("ee_pose").Eval(station.GetMyContextFromRoot(context))
-    hold.set_plan(hold.GetMyMutableContextFromRoot(context), hold_plan(X_WE, config.station.gripper_home))
+    hold.set_plan(hold.GetMyMutableContextFromRoot(context), hold_plan(X_WE, config.gripper_home))
     simulator.Initialize()
     advance_station(simulator, station, context, 0.1)   # the status of now, not of the reset, in the first sample
-    frame_hz = float(config.station.camera.fps) if segmenter is not None else 10.0
+    frame_hz = float(config.camera.fps) if segmenter is not None else 10.0
     recorder = StationRecorder(station, context, simulator, 100.0, frame_hz, segmenter)
     recorder.anchor()
     print(f"recording {args.duration:.0f} s: guide the arm now (Ctrl-C ends early)", flush=True)
     n = int(math.ceil(args.duration * frame_hz - 1e-9)) * recorder.k + 1
-    grip = float(config.station.gripper_home)      # the hand's width is not read back
+    grip = float(config.gripper_home)      # the hand's width is not read back
     try:
         for _ in range(n):
             recorder.sample(grip)
@@ -231,22 +234,22 @@ def _record_demo(args) -> int:
             recorder.sample(grip)
     obj = np.asarray(recorder.obj)
     if not np.all(np.isfinite(obj)):
-        raise ValueError(f"no object state on {config.ground_truth_channel} during the recording: "
+        raise ValueError(f"no object state on {config.driver.ground_truth_channel} during the recording: "
                          "the demonstration format needs it (see drake-skill hardware --help)")
     X_WO = X_WO_placed
     if recorder.X_WO_perceived is not None:
         from drake_skill.station.recording import vector_to_pose
         X_WO = vector_to_pose(recorder.X_WO_perceived)
     from drake_skill.station.success import judge_success
-    success = judge_success(float(obj[-1]), config.station.success)
-    metadata = {"source": "kinesthetic", "lcm_url": config.lcm_url,
+    success = judge_success(float(obj[-1]), config.success)
+    metadata = {"source": "kinesthetic", "lcm_url": config.driver.lcm_url,
                 "X_WO_note": "X_OE uses the perceived X_WO at the first frame (the placed pose without a camera)"}
     demo = demonstration_from(recorder, skill_name, args.seed, X_WO, success, metadata)
     path = append_demonstration(demo, args.out)      # demos.json updated in the same swap
     print(f"wrote {path}: {demo.duration:.1f} s, final object state {demo.final_object_state:.3f}, "
           f"{'success' if success else 'failure'}")
     # The robot measures the external joint torques, not the contact force (0): the torques decide.
-    warn_force_margin([demo], [path], config.station.reflex)
+    warn_force_margin([demo], [path], config.reflex)
     return 0
 
 
@@ -257,7 +260,7 @@ def _refine(args) -> int:
     from drake_skill.learning.imitation import check_demo_pairs
     from drake_skill.learning.refine import refine_on_robot, refinement_lines
     from drake_skill.skill import Skill
-    from drake_skill.station.hardware.station import build_hardware_station
+    from drake_skill.station.make import make_station
 
     if args.iterations < 1:
         raise ValueError(f"--iterations must be at least 1, got {args.iterations}")
@@ -272,8 +275,8 @@ def _refine(args) -> int:
     demos = load_demonstrations(args.demos, skill=skill.name)
     check_demo_pairs(skill, demos, f"--demos {args.demos}")
     config = load_config(args.config, args.lcm_url, skill.name)
-    config.station.enable_camera = False           # the placed pose is the object frame: no camera needed
-    station = build_hardware_station(config)
+    config.enable_camera = False           # the placed pose is the object frame: no camera needed
+    station = make_station(config, hardware=True)
     runs = len(demos) * (args.iterations + 1)
     print(f"refining {len(demos)} DMPs of {skill.name} on the robot: {runs} runs", flush=True)
 

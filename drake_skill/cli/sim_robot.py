@@ -10,7 +10,8 @@ clock are dropped, as the driver does), publishes lcmt_panda_status on
 PANDA_STATUS every plant step, the camera's images (lcmt_image_array) on
 DRAKE_RGBD_CAMERA_IMAGES at the camera rate and the object state (lid angle
 / drawer travel, lcmt_scope) on SIM_OBJECT_STATE; channels and URL from
---config (a HardwareConfig YAML) or the defaults. The object is placed at
+--config (a scenario YAML laid over the skill's, its ``driver: !PandaLcmDriver
+{...}``) or the defaults. The object is placed at
 the pose drawn from --seed, as ``drake-skill hardware run --seed0`` expects.
 
 --guide plays the skill's scripted, human-like demonstration on the arm (a
@@ -37,7 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--skill", required=True, metavar="SKILL",
                         help="the skill whose scenario the robot stands in (a shipped skill's name or a skill file)")
     parser.add_argument("--seed", type=int, default=None, help="object pose seed (default: the nominal pose)")
-    parser.add_argument("--config", type=Path, help="HardwareConfig YAML (channels, URL, scenario)")
+    parser.add_argument("--config", type=Path, metavar="SCENARIO",
+                        help="a scenario YAML laid over the skill's: the driver's channels and URL "
+                             "(driver: !PandaLcmDriver {...}), camera, object...")
     parser.add_argument("--no-camera", action="store_true", help="no camera (faster; no images published)")
     parser.add_argument("--duration", type=float, default=float("inf"), help="stop after this many seconds")
     parser.add_argument("--guide", action="store_true",
@@ -45,18 +48,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def load_config(path, lcm_url, skill, camera: bool = True):
-    """The HardwareConfig of the CLI options (scenario from the skill unless the file names one)."""
+    """The scenario of the CLI options: the skill's, with a ``!PandaLcmDriver``, then the file
+    ``path`` laid over it (a scenario overlay, e.g. ``driver: !PandaLcmDriver {lcm_url: ...}``),
+    then ``--lcm-url`` and ``--no-camera``."""
     from drake_skill.cli import errors
-    from drake_skill.station.hardware.config import HardwareConfig, load_hardware_config, validate_hardware_config
+    from drake_skill.station.config import load_station_config, validate_station_config
+    from drake_skill.station.drivers import PandaLcmDriver, require_panda_driver
 
-    defaults = HardwareConfig()
-    defaults.station = errors.skill(skill).station_config()
-    config = load_hardware_config(path, defaults=defaults) if path is not None else defaults
+    defaults = errors.skill(skill).station_config()
+    defaults.driver = PandaLcmDriver()
+    config = load_station_config(path, defaults=defaults) if path is not None else defaults
+    require_panda_driver(config, "the robot", str(path))
     if lcm_url is not None:
-        config.lcm_url = lcm_url
+        config.driver.lcm_url = lcm_url
     if not camera:
-        config.station.enable_camera = False
-    return validate_hardware_config(config)
+        config.enable_camera = False
+    return validate_station_config(config)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -77,11 +84,12 @@ def run(args: argparse.Namespace) -> int:
             """The skill's scripted, human-like demonstration for the run's seed."""
             return humanlike_plan(spec, X_WO, X_WE_home, seed, DemonstratorConfig())[0]
     robot = SimRobot(config, guide=guide)
-    url = config.lcm_url or "(LCM default)"
-    print(f"sim-robot: {args.skill} scenario on {url}: commands {config.command_channel}, "
-          f"status {config.status_channel}, hand {config.hand_command_channel}"
-          + (f", camera {config.camera_channel}" if config.station.enable_camera else "")
-          + (f", object state {config.ground_truth_channel}" if config.ground_truth_channel else ""))
+    driver = config.driver
+    url = driver.lcm_url or "(LCM default)"
+    print(f"sim-robot: {args.skill} scenario on {url}: commands {driver.command_channel}, "
+          f"status {driver.status_channel}, hand {driver.hand_command_channel}"
+          + (f", camera {driver.camera_channel}" if config.enable_camera else "")
+          + (f", object state {driver.ground_truth_channel}" if driver.ground_truth_channel else ""))
     print("guiding the arm through the scripted demonstration" if args.guide else
           "following position commands; Ctrl-C stops")
     def stop(signum, frame):

@@ -1,7 +1,9 @@
 """The station box: the Panda, the object and the camera behind one set of ports.
 
-Two stations satisfy one contract (``interface.StationInterface``); the rest of
-the system sees only its ports:
+Two stations satisfy one contract (``interface.StationInterface``), and one
+factory builds both from one scenario: ``make.make_station(scenario,
+hardware=False, meshcat=None)``, the arm driven as the scenario's ``driver``
+says (``drivers``). The rest of the system sees only the ports:
 
 - ``sim/``: the simulated station.
   - ``sim.builder``: ``build_station(config)``, the MultibodyPlant diagram;
@@ -10,14 +12,14 @@ the system sees only its ports:
     protocol, the stand-in robot the hardware port is tested against.
 - ``hardware/``: the real robot.
   - ``hardware.station``: ``build_hardware_station(config)``, the same ports
-    backed by the Panda driver over LCM and a camera;
-  - ``hardware.config``: its configuration (channels, safety, camera).
+    backed by the Panda driver over LCM and a camera.
 
 Shared by both:
 
 - ``interface``: the contract (ports and their types);
 - ``config``: the scenario (``StationConfig``), loaded from ``scenarios/`` or a
-  user's own file;
+  user's own file; ``drivers``: its ``driver`` field's types (the robot's LCM
+  channels, URL, timeouts and workspace among them); ``make``: the factory;
 - ``recording``: ``StationRecorder``, the one loop that advances and samples a
   station, and the errors that end a run early;
 - ``controller``, ``limits``, ``reflex``: the end-effector controller, the

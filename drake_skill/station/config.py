@@ -36,6 +36,7 @@ from drake_skill.common import look_at
 from drake_skill.configs import load_typed
 from drake_skill.perception.segmentation import CLUSTER_RULES, VALUE_MIN
 from drake_skill.station import limits, models
+from drake_skill.station.drivers import EndEffectorDriver, JointSetpointDriver, PandaLcmDriver, validate_driver
 from drake_skill.station.models import model_url
 
 #: The model instances every station's directives must add (the object's is named in ``object.model``).
@@ -285,6 +286,11 @@ class StationConfig:
     cameras: more cameras (Drake's CameraConfig, fixed in the world, the same
       renderer), for people and tools: each exports ``<name>_color_image``,
       ``<name>_depth_image`` and ``<name>_label_image``; nothing reads them.
+    driver: what drives the arm (``drake_skill.station.drivers``): an
+      ``!EndEffectorDriver`` (the default: hand pose in), a
+      ``!JointSetpointDriver`` (joint set points in, the LCM sim robot's) or
+      a ``!PandaLcmDriver`` (the real Panda over LCM: its channels, URL,
+      timeouts and workspace; the hardware station's).
     """
 
     plant: MultibodyPlantConfig = dc.field(default_factory=default_plant)
@@ -300,6 +306,8 @@ class StationConfig:
     controller: ControllerConfig = dc.field(default_factory=ControllerConfig)
     reflex: ReflexConfig = dc.field(default_factory=ReflexConfig)
     success: SuccessConfig = dc.field(default_factory=SuccessConfig)
+    driver: typing.Union[EndEffectorDriver, JointSetpointDriver, PandaLcmDriver] = dc.field(
+        default_factory=EndEffectorDriver)
 
     @property
     def time_step(self) -> float:
@@ -418,6 +426,7 @@ def validate_station_config(config: StationConfig) -> StationConfig:
     if abs(steps - round(steps)) > 1e-9 * steps or round(steps) < 1:
         _bad("controller.limiter_period", ctrl.limiter_period,
              f"a period that divides plant.time_step = {config.time_step} s (e.g. 0.001)")
+    validate_driver(config.driver, ctrl.diff_ik_period)
 
     ref = config.reflex
     _number("reflex.contact_force_max", ref.contact_force_max, 0.0, 1e4, lo_open=True, what="a force [N]")

@@ -29,7 +29,7 @@ Safety lives here, not in the caller's hands:
 
 * The first command is the measured position: ``reset`` waits for a status
   and starts the controller's integrator at the measured joints.
-* Commanded hand positions are clipped to ``config.workspace``.
+* Commanded hand positions are clipped to the driver's ``workspace``.
 * Joint commands come out of the same :class:`EndEffectorController` as in
   simulation: differential IK within Franka's joint position and velocity
   limits, then the rate limiter at the velocity, acceleration and jerk
@@ -78,7 +78,8 @@ from pydrake.systems.sensors import PixelType
 from drake_skill.station import recording as _recording
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.controller import EndEffectorController, make_control_plant
-from drake_skill.station.hardware.config import HardwareConfig, validate_hardware_config
+from drake_skill.station.config import StationConfig, validate_station_config
+from drake_skill.station.drivers import PandaLcmDriver, require_panda_driver
 from drake_skill.station.reflex import add_reflex_monitor
 
 N_JOINTS = 7
@@ -443,13 +444,15 @@ def camera_geometry(station_config):
 class HardwareStation(Diagram):
     """The hardware port (see the module docstring for what it does).
 
-    Handles a runner needs: ``config`` (the StationConfig of the scenario),
-    ``hardware_config``, ``lcm``, ``realtime`` (True), ``ee_controller``;
+    Handles a runner needs: ``config`` (the scenario), ``driver`` (its
+    ``PandaLcmDriver``), ``lcm``, ``realtime`` (True), ``ee_controller``;
     :meth:`reset`, :meth:`object_pose`, :meth:`set_reset_hook`.
 
     Args:
-        config: the :class:`HardwareConfig`.
-        lcm: a DrakeLcm to use (default: a new one on ``config.lcm_url``). The
+        config: the scenario (``StationConfig``); its ``driver`` must be a
+            :class:`~drake_skill.station.drivers.PandaLcmDriver` (channels, URL,
+            timeouts, workspace).
+        lcm: a DrakeLcm to use (default: a new one on ``config.driver.lcm_url``). The
             station owns its LcmInterfaceSystem: it is the one that handles
             the subscriptions of that DrakeLcm.
         meshcat: a ``pydrake.geometry.Meshcat`` to draw the measured arm (and the
@@ -463,25 +466,25 @@ class HardwareStation(Diagram):
     #: simulated robot publishes it on ``ground_truth_channel``.
     has_ground_truth = False
 
-    def __init__(self, config: HardwareConfig, lcm: DrakeLcm | None = None, meshcat=None,
+    def __init__(self, config: StationConfig, lcm: DrakeLcm | None = None, meshcat=None,
                  commanding: bool = True):
         super().__init__()
-        self.hardware_config = validate_hardware_config(config)
-        self.config = config.station
-        self.lcm = lcm if lcm is not None else DrakeLcm(config.lcm_url)
+        self.config = validate_station_config(config)
+        self.driver = driver = require_panda_driver(config, "the hardware station")
+        self.lcm = lcm if lcm is not None else DrakeLcm(driver.lcm_url)
         self._reset_hook = None
         builder = DiagramBuilder()
         builder.AddNamedSystem("lcm", LcmInterfaceSystem(self.lcm))
 
         # Status in.
         self._status_sub = builder.AddNamedSystem("status_subscriber", LcmSubscriberSystem.Make(
-            config.status_channel, lcmt_panda_status, self.lcm, use_cpp_serializer=True))
+            driver.status_channel, lcmt_panda_status, self.lcm, use_cpp_serializer=True))
         receiver = builder.AddNamedSystem("status_receiver", PandaStatusReceiver(N_JOINTS))
         builder.Connect(self._status_sub.get_output_port(), receiver.get_input_port())
         self._status_py = builder.AddNamedSystem("status_monitor_subscriber", LcmSubscriberSystem.Make(
-            config.status_channel, lcmt_panda_status, self.lcm))
+            driver.status_channel, lcmt_panda_status, self.lcm))
         self.monitor = builder.AddNamedSystem("status_monitor", StatusMonitor(
-            STATUS_CHECK_PERIOD, config.status_timeout, config.status_channel))
+            STATUS_CHECK_PERIOD, driver.status_timeout, driver.status_channel))
         builder.Connect(self._status_py.get_output_port(), self.monitor.GetInputPort("status"))
         builder.Connect(receiver.get_torque_external_output_port(), self.monitor.GetInputPort("torque_external"))
         state = builder.AddNamedSystem("panda_state", Multiplexer([N_JOINTS, N_JOINTS]))
@@ -494,11 +497,11 @@ class HardwareStation(Diagram):
         self._receiver = receiver
 
         # Hand pose in, joint position commands out.
-        ws = config.workspace
+        ws = driver.workspace
         clip = builder.AddNamedSystem("workspace_clip", WorkspaceClip(ws.lower, ws.upper))
         builder.ExportInput(clip.get_input_port(), "ee_pose_desired")
         controller = builder.AddNamedSystem("ee_controller", EndEffectorController(
-            self.config.controller, self.config.q_home))
+            config.controller, config.q_home))
         self.ee_controller = controller
         builder.Connect(clip.get_output_port(), controller.GetInputPort("X_WE_desired"))
         q_only = builder.AddNamedSystem("q_commanded", _Selector(2 * N_JOINTS, N_JOINTS))
@@ -507,26 +510,26 @@ class HardwareStation(Diagram):
         builder.Connect(q_only.get_output_port(), encoder.get_input_port())
         if commanding:
             publisher = builder.AddNamedSystem("command_publisher", LcmPublisherSystem.Make(
-                config.command_channel, lcmt_panda_command, self.lcm, publish_period=config.command_period))
+                driver.command_channel, lcmt_panda_command, self.lcm, publish_period=driver.command_period))
             builder.Connect(encoder.get_output_port(), publisher.get_input_port())
 
         # Gripper.
         hand = builder.AddNamedSystem("hand_command", SchunkWsgCommandSender())
         if meshcat is None:
             builder.ExportInput(hand.GetInputPort("position"), "gripper_command")
-        force = builder.AddNamedSystem("hand_force", ConstantVectorSource([config.hand_force]))
+        force = builder.AddNamedSystem("hand_force", ConstantVectorSource([driver.hand_force]))
         builder.Connect(force.get_output_port(), hand.GetInputPort("force_limit"))
         if commanding:
             hand_pub = builder.AddNamedSystem("hand_publisher", LcmPublisherSystem.Make(
-                config.hand_command_channel, lcmt_schunk_wsg_command, self.lcm, publish_period=0.1,
+                driver.hand_command_channel, lcmt_schunk_wsg_command, self.lcm, publish_period=0.1,
                 use_cpp_serializer=True))
             builder.Connect(hand.get_output_port(), hand_pub.get_input_port())
 
         # No ground truth on the robot; a simulated robot publishes its own.
         self._truth_sub = None
-        if config.ground_truth_channel:
+        if driver.ground_truth_channel:
             truth_sub = self._truth_sub = builder.AddNamedSystem("ground_truth_subscriber", LcmSubscriberSystem.Make(
-                config.ground_truth_channel, lcmt_scope, self.lcm))
+                driver.ground_truth_channel, lcmt_scope, self.lcm))
             truth = builder.AddNamedSystem("object_state", GroundTruthDecoder())
             builder.Connect(truth_sub.get_output_port(), truth.get_input_port())
         else:
@@ -557,10 +560,10 @@ class HardwareStation(Diagram):
         self.set_name("hardware_station")
 
     def _add_camera(self, builder) -> None:
-        config = self.hardware_config
+        driver = self.driver
         info, X_WC = camera_geometry(self.config)
         self.camera_info, self._X_WC = info, X_WC
-        if config.camera_source == "realsense":  # pragma: no cover - needs a device
+        if driver.camera_source == "realsense":  # pragma: no cover - needs a device
             cam = builder.AddNamedSystem("camera", RealSenseCamera(info.width(), info.height(), 10.0))
             color, depth = cam.GetOutputPort("color_image"), cam.GetOutputPort("depth_image")
             from pydrake.systems.sensors import ImageLabel16I
@@ -568,7 +571,7 @@ class HardwareStation(Diagram):
                 AbstractValue.Make(ImageLabel16I(info.width(), info.height())))).get_output_port()
         else:
             self._camera_sub = builder.AddNamedSystem("camera_subscriber", LcmSubscriberSystem.Make(
-                config.camera_channel, lcmt_image_array, self.lcm))
+                driver.camera_channel, lcmt_image_array, self.lcm))
             images = builder.AddNamedSystem("camera_images", LcmImageArrayDecoder(info.width(), info.height()))
             builder.Connect(self._camera_sub.get_output_port(), images.get_input_port())
             color, depth, label = (images.GetOutputPort(name) for name in ("color_image", "depth_image",
@@ -694,9 +697,9 @@ class HardwareStation(Diagram):
             if subscriber.WaitForMessage(count, None, 1e-4) > count:
                 return
             if time.monotonic() > deadline:
-                config = self.hardware_config
+                driver = self.driver
                 raise StaleStatusError(
-                    f"no {what} within {timeout:.1f} s on LCM {config.lcm_url or '(default URL)'}: "
+                    f"no {what} within {timeout:.1f} s on LCM {driver.lcm_url or '(default URL)'}: "
                     "is the driver (or drake-skill sim-robot) running with the same URL and channels?")
 
     def reset(self, context, seed: int | None = None) -> RigidTransform:
@@ -712,7 +715,7 @@ class HardwareStation(Diagram):
         X_WO = self.nominal_object_pose() if seed is None else self.random_object_pose(seed)
         if self._reset_hook is not None:
             self._reset_hook(seed, X_WO)
-        timeout = self.hardware_config.reset_timeout
+        timeout = self.driver.reset_timeout
         self._pump_until(self._status_sub, "robot status", timeout)
         if self._camera_sub is not None:
             self._pump_until(self._camera_sub, "camera image", timeout)
@@ -742,8 +745,10 @@ class _Selector(LeafSystem):
         output.SetFromVector(self._u.Eval(context)[:self._m])
 
 
-def build_hardware_station(config: HardwareConfig | None = None, lcm: DrakeLcm | None = None,
+def build_hardware_station(config: StationConfig | None = None, lcm: DrakeLcm | None = None,
                            meshcat=None, commanding: bool = True) -> HardwareStation:
-    """Builds the hardware station described by ``config`` (defaults: the Open scenario)."""
-    return HardwareStation(config if config is not None else HardwareConfig(), lcm=lcm, meshcat=meshcat,
-                           commanding=commanding)
+    """Builds the hardware station of the scenario ``config`` (its driver a ``!PandaLcmDriver``;
+    default: the Open scene on LCM's default URL); ``drake_skill.station.make.make_station``
+    with ``hardware=True`` does the same."""
+    config = config if config is not None else StationConfig(driver=PandaLcmDriver())
+    return HardwareStation(config, lcm=lcm, meshcat=meshcat, commanding=commanding)

@@ -64,13 +64,15 @@ from pydrake.multibody.tree import BodyIndex, PdControllerGains
 from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource, Demultiplexer, MatrixGain, Multiplexer
+from pydrake.systems.primitives import (ConstantValueSource, ConstantVectorSource, Demultiplexer, MatrixGain,
+                                        Multiplexer, PassThrough)
 from pydrake.systems.sensors import PixelType, RgbdSensor
 from pydrake.common.value import AbstractValue, Value
 
 from drake_skill.station.controller import X_HAND_TCP, EndEffectorController, add_arm_and_hand, make_finger_limiter
 from drake_skill.station.models import add_package_paths, add_panda_illustration, process_directives
 from drake_skill.station.config import StationConfig, validate_station_config
+from drake_skill.station.drivers import JointSetpointDriver
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor, robot_scene_pairs
 
@@ -231,19 +233,10 @@ class Station(Diagram):
         self.panda, self.hand, self.object_instance = arm, hand, obj
         self.object_base, self.object_joint = scene.object_base, scene.object_joint
         self.robot_bodies = scene.robot_bodies
-        q_home = np.asarray(config.q_home, dtype=float)
-        ctrl = config.controller
 
-        # Hand pose in, rate-limited joint impedance set points out.
-        controller = builder.AddNamedSystem("ee_controller", EndEffectorController(ctrl, q_home, config.time_step))
-        self.ee_controller = controller
-        builder.Connect(controller.GetOutputPort("panda_state_desired"),
-                        plant.get_desired_state_input_port(arm))
-        builder.ExportInput(controller.GetInputPort("X_WE_desired"), "ee_pose_desired")
-        builder.ExportOutput(controller.GetOutputPort("joint_acceleration_commanded"),
-                             "joint_acceleration_commanded")
+        self.ee_controller = self._add_arm_driver(builder, scene)
         # Opening w -> each finger at w/2, at most the hand's finger speed.
-        gripper = builder.AddNamedSystem("gripper", make_finger_limiter(ctrl, config.time_step))
+        gripper = builder.AddNamedSystem("gripper", make_finger_limiter(config.controller, config.time_step))
         self.gripper = gripper
         builder.Connect(gripper.GetOutputPort("finger_state_desired"), plant.get_desired_state_input_port(hand))
         builder.ExportInput(gripper.GetInputPort("opening"), "gripper_command")
@@ -299,6 +292,30 @@ class Station(Diagram):
         builder.BuildInto(self)
         self.set_name("station")
         self._kinematics = None
+
+    def _add_arm_driver(self, builder, scene) -> EndEffectorController | None:
+        """The scenario's ``driver`` between the command input and the arm's joint impedance
+        (``drake_skill.station.drivers``); returns the end-effector controller, or None.
+
+        ``!JointSetpointDriver``: input ``panda_state_desired`` [q (7), v (7)] straight to the
+        arm's PD set points. Otherwise (``!EndEffectorDriver``, ``!PandaLcmDriver``: the IK runs
+        on drake-skill's side on the robot too): input ``ee_pose_desired``, differential IK and
+        the rate limiter, and output ``joint_acceleration_commanded``.
+        """
+        config = self.config
+        desired = scene.plant.get_desired_state_input_port(scene.panda)
+        if isinstance(config.driver, JointSetpointDriver):
+            set_points = builder.AddNamedSystem("panda_state_desired", PassThrough(14))
+            builder.Connect(set_points.get_output_port(), desired)
+            builder.ExportInput(set_points.get_input_port(), "panda_state_desired")
+            return None
+        controller = builder.AddNamedSystem("ee_controller", EndEffectorController(
+            config.controller, np.asarray(config.q_home, dtype=float), config.time_step))
+        builder.Connect(controller.GetOutputPort("panda_state_desired"), desired)
+        builder.ExportInput(controller.GetInputPort("X_WE_desired"), "ee_pose_desired")
+        builder.ExportOutput(controller.GetOutputPort("joint_acceleration_commanded"),
+                             "joint_acceleration_commanded")
+        return controller
 
     def hand_pose(self, q) -> RigidTransform:
         """X_WE, the ``ee_pose`` output's value, at arm joint positions q (7) [rad] (the
@@ -423,7 +440,8 @@ class Station(Diagram):
         """
         X_WO = self.nominal_object_pose() if seed is None else self.random_object_pose(seed)
         self.set_object_pose(context, X_WO)
-        self.ee_controller.set_joint_positions(context, self.config.q_home)
+        if self.ee_controller is not None:     # joint set points come from outside
+            self.ee_controller.set_joint_positions(context, self.config.q_home)
         self.gripper.set_opening(context, self.config.gripper_home)
         self.reflex_monitor.start(self.reflex_monitor.GetMyMutableContextFromRoot(context))
         return X_WO

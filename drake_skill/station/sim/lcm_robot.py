@@ -1,7 +1,7 @@
 """A simulated Panda that speaks the drake-franka-driver's LCM protocol.
 
-The simulated station (``drake_skill.station.sim.builder``, with its joint
-impedance set points as the input) behind Drake's driver-side systems::
+The simulated station (``drake_skill.station.sim.builder``, its driver a
+``!JointSetpointDriver``: joint impedance set points in) behind Drake's driver-side systems::
 
     LCM PANDA_COMMAND --> [PandaCommandReceiver] --> [driver checks] --> [q, v] --> Station (plant, object, camera)
     Station --> [PandaStatusSender] --> LCM PANDA_STATUS
@@ -40,13 +40,14 @@ from pydrake.lcm import DrakeLcm
 from pydrake.manipulation import (PandaCommandReceiver, PandaControlMode, PandaStatusSender,
                                   SchunkWsgCommandReceiver)
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, StateInterpolatorWithDiscreteDerivative
 from pydrake.systems.sensors import ImageToLcmImageArrayT
 
-from drake_skill.station.sim.builder import Station
-from drake_skill.station.hardware.config import HardwareConfig, validate_hardware_config
+from drake_skill.station.config import StationConfig, validate_station_config
+from drake_skill.station.drivers import JointSetpointDriver, PandaLcmDriver, require_panda_driver
+from drake_skill.station.make import make_station
 from drake_skill.station.success import judge_success
 
 N_JOINTS = 7
@@ -131,62 +132,19 @@ class GroundTruthEncoder(LeafSystem):
         output.set_value(msg)
 
 
-#: The station input that carries the joint set points [q, v] (14) in the simulated robot.
-JOINT_COMMAND_PORT = "ee_pose_desired"
-_BUILD_LOCK = threading.Lock()
-
-
-class _JointSetPoints(Diagram):
-    """Stands in for the station's end-effector controller: input ``X_WE_desired``
-    is the joint set point [q, v] (14) itself, passed to ``panda_state_desired``
-    (``update_period``, the controller's limiter update, does not apply)."""
-
-    def __init__(self, config, q_home, update_period=None):
-        super().__init__()
-        from pydrake.systems.primitives import PassThrough
-
-        builder = DiagramBuilder()
-        through = builder.AddNamedSystem("set_points", PassThrough(2 * N_JOINTS))
-        zeros = builder.AddNamedSystem("zero_acceleration", ConstantVectorSource(np.zeros(N_JOINTS)))
-        builder.ExportInput(through.get_input_port(), "X_WE_desired")
-        builder.ExportOutput(through.get_output_port(), "panda_state_desired")
-        builder.ExportOutput(zeros.get_output_port(), "joint_acceleration_commanded")
-        builder.BuildInto(self)
-
-    def set_joint_positions(self, context, q) -> None:
-        """Nothing to reset: the set points come from the driver."""
-
-
-def _joint_command_station(station_config, meshcat) -> Station:
-    """The simulated station with the joint set points as its command input.
-
-    The Panda's joint impedance tracks [q, v] from the driver instead of the
-    end-effector controller's; the station is built with :class:`_JointSetPoints`
-    in the controller's place (so nothing of the station is duplicated), and
-    its ``ee_pose_desired`` input (:data:`JOINT_COMMAND_PORT`) then carries [q, v].
-    """
-    from drake_skill.station.sim import builder as station_builder
-
-    with _BUILD_LOCK:
-        original = station_builder.EndEffectorController
-        station_builder.EndEffectorController = _JointSetPoints
-        try:
-            station = Station(station_config, meshcat)
-        finally:
-            station_builder.EndEffectorController = original
-    port = station.GetInputPort(JOINT_COMMAND_PORT)
-    if port.size() != 2 * N_JOINTS:
-        raise AssertionError("the station did not take the joint set points in its controller's place")
-    return station
+#: The station input that carries the joint set points [q, v] (14) in the simulated robot
+#: (its scenario's driver is a ``!JointSetpointDriver``).
+JOINT_COMMAND_PORT = "panda_state_desired"
 
 
 class SimRobot:
     """The simulated station behind the driver's LCM protocol, on its own simulator.
 
     Args:
-        config: the :class:`HardwareConfig` (its ``station`` is the scenario,
-            its channels and URL the driver's).
-        lcm: a DrakeLcm to use (default: a new one on ``config.lcm_url``).
+        config: the scenario (``StationConfig``); its ``driver``, a
+            ``!PandaLcmDriver``, gives the channels and the URL. The robot's own
+            station is the scenario with a ``!JointSetpointDriver``.
+        lcm: a DrakeLcm to use (default: a new one on ``config.driver.lcm_url``).
         pump: add an LcmInterfaceSystem to handle ``lcm``'s subscriptions.
             With the hardware station in the same process on the same
             (``memq://``) DrakeLcm, pass False: one DrakeLcm must be handled
@@ -207,18 +165,21 @@ class SimRobot:
             ``drake_skill.demos.demonstrator.humanlike_plan``).
     """
 
-    def __init__(self, config: HardwareConfig | None = None, lcm: DrakeLcm | None = None,
+    def __init__(self, config: StationConfig | None = None, lcm: DrakeLcm | None = None,
                  pump: bool = True, meshcat=None, expire_sec: float = 0.1, guide=None):
-        self.config = validate_hardware_config(config if config is not None else HardwareConfig())
-        self.lcm = lcm if lcm is not None else DrakeLcm(self.config.lcm_url)
+        config = config if config is not None else StationConfig(driver=PandaLcmDriver())
+        self.config = validate_station_config(config)
+        self.driver = driver = require_panda_driver(config, "the simulated robot")
+        self.lcm = lcm if lcm is not None else DrakeLcm(driver.lcm_url)
         # The reflex is the driver side's: the hardware station's monitor decides it from the
         # external torques this robot reports (as on the Panda); its own station's monitor
         # would stop this simulation instead and leave the driver without status.
-        station_config = copy.deepcopy(self.config.station)
+        station_config = copy.deepcopy(config)
         station_config.reflex.enabled = False
+        station_config.driver = JointSetpointDriver()
         step = float(station_config.time_step)
         builder = DiagramBuilder()
-        self.station = builder.AddNamedSystem("station", _joint_command_station(station_config, meshcat))
+        self.station = builder.AddNamedSystem("station", make_station(station_config, meshcat=meshcat))
         if pump:
             builder.AddNamedSystem("lcm", LcmInterfaceSystem(self.lcm))
         split = builder.AddNamedSystem("state_split", Demultiplexer([N_JOINTS, N_JOINTS]))
@@ -226,13 +187,13 @@ class SimRobot:
 
         # Commands in.
         sub = builder.AddNamedSystem("command_subscriber", LcmSubscriberSystem.Make(
-            self.config.command_channel, lcmt_panda_command, self.lcm, use_cpp_serializer=True))
+            driver.command_channel, lcmt_panda_command, self.lcm, use_cpp_serializer=True))
         receiver = builder.AddNamedSystem("command_receiver", PandaCommandReceiver(
             N_JOINTS, PandaControlMode.kPosition))
         builder.Connect(sub.get_output_port(), receiver.get_message_input_port())
         builder.Connect(split.get_output_port(0), receiver.get_position_measured_input_port())
         sub_py = builder.AddNamedSystem("command_check_subscriber", LcmSubscriberSystem.Make(
-            self.config.command_channel, lcmt_panda_command, self.lcm))
+            driver.command_channel, lcmt_panda_command, self.lcm))
         self.checks = builder.AddNamedSystem("driver_checks", DriverChecks(step, expire_sec))
         builder.Connect(sub_py.get_output_port(), self.checks.GetInputPort("command"))
         builder.Connect(receiver.get_commanded_position_output_port(), self.checks.GetInputPort("position"))
@@ -271,25 +232,25 @@ class SimRobot:
         else:
             builder.Connect(zeros.get_output_port(), sender.get_torque_external_input_port())
         status_pub = builder.AddNamedSystem("status_publisher", LcmPublisherSystem.Make(
-            self.config.status_channel, lcmt_panda_status, self.lcm, publish_period=step,
+            driver.status_channel, lcmt_panda_status, self.lcm, publish_period=step,
             use_cpp_serializer=True))
         builder.Connect(sender.get_output_port(), status_pub.get_input_port())
 
         # The hand.
         hand_sub = builder.AddNamedSystem("hand_subscriber", LcmSubscriberSystem.Make(
-            self.config.hand_command_channel, lcmt_schunk_wsg_command, self.lcm, use_cpp_serializer=True))
+            driver.hand_command_channel, lcmt_schunk_wsg_command, self.lcm, use_cpp_serializer=True))
         hand = builder.AddNamedSystem("hand_receiver", SchunkWsgCommandReceiver(
-            station_config.gripper_home, self.config.hand_force))
+            station_config.gripper_home, driver.hand_force))
         builder.Connect(hand_sub.get_output_port(), hand.get_input_port())
         if guide is None:
             builder.Connect(hand.GetOutputPort("position"), self.station.GetInputPort("gripper_command"))
 
         # The ground truth, for the hardware station's object_state.
-        if self.config.ground_truth_channel:
+        if driver.ground_truth_channel:
             truth = builder.AddNamedSystem("ground_truth_encoder", GroundTruthEncoder())
             builder.Connect(self.station.GetOutputPort("object_state"), truth.get_input_port())
             truth_pub = builder.AddNamedSystem("ground_truth_publisher", LcmPublisherSystem.Make(
-                self.config.ground_truth_channel, lcmt_scope, self.lcm, publish_period=0.01))
+                driver.ground_truth_channel, lcmt_scope, self.lcm, publish_period=0.01))
             builder.Connect(truth.get_output_port(), truth_pub.get_input_port())
 
         # The camera.
@@ -298,7 +259,7 @@ class SimRobot:
             for name in ("color", "depth", "label"):
                 builder.Connect(self.station.GetOutputPort(f"{name}_image"), images.GetInputPort(name))
             camera_pub = builder.AddNamedSystem("camera_publisher", LcmPublisherSystem.Make(
-                self.config.camera_channel, lcmt_image_array, self.lcm,
+                driver.camera_channel, lcmt_image_array, self.lcm,
                 publish_period=1.0 / float(station_config.camera.fps), use_cpp_serializer=True))
             builder.Connect(images.image_array_t_msg_output_port(), camera_pub.get_input_port())
 
