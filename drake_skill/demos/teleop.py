@@ -329,7 +329,7 @@ class TeleopSession:
     """
 
     def __init__(self, skill, meshcat, config: TeleopConfig | None = None, station_config=None, page=None):
-        from drake_skill.station.sim.builder import build_station
+        from drake_skill.station.make import make_station
         from drake_skill.skills import load_skill
 
         spec = load_skill(skill)
@@ -341,7 +341,7 @@ class TeleopSession:
         self.meshcat = meshcat
         self.page = page
         builder = DiagramBuilder()
-        self.station = builder.AddNamedSystem("station", build_station(station_config, meshcat))
+        self.station = builder.AddNamedSystem("station", make_station(station_config, meshcat=meshcat))
         home_context = self.station.CreateDefaultContext()
         X_WE_home = self.station.GetOutputPort("ee_pose").Eval(home_context)
         self.teleop = builder.AddNamedSystem("teleop", MeshcatTeleop(

@@ -57,7 +57,8 @@ from pydrake.systems.primitives import ConstantVectorSource
 from drake_skill.common import IkWarningCounter
 from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
-from drake_skill.station.sim.builder import Station, build_station
+from drake_skill.station.make import make_station
+from drake_skill.station.sim.builder import Station
 from drake_skill.station.config import StationConfig
 from drake_skill.station.frames import add_camera_frames
 from drake_skill.station.records import StationLoggers
@@ -289,7 +290,7 @@ class RolloutRunner:
         config: :class:`RolloutConfig`.
         meshcat: a ``pydrake.geometry.Meshcat`` to draw the station in (or None).
         station: a built station with the simulated station's ports to use
-            instead of ``build_station(station_config)``, e.g. the hardware
+            instead of ``make_station(station_config)``, e.g. the hardware
             station (``drake_skill.station.hardware.station``); its ``realtime``
             attribute, when true, paces the simulator at real time.
         dmp: the DMP whose goal g and duration tau every rollout executes
@@ -322,7 +323,7 @@ class RolloutRunner:
         self.meshcat = meshcat
         builder = DiagramBuilder()
         self.station: Station = builder.AddNamedSystem(
-            "station", station if station is not None else build_station(station_config, meshcat))
+            "station", station if station is not None else make_station(station_config, meshcat=meshcat))
         self.config = self.station.config
         self.pose_source = builder.AddNamedSystem("object_pose", ObjectPoseSource())
         self.dmp_system = builder.AddNamedSystem("dmp", DmpSystem(self.dmp, dmp_config))

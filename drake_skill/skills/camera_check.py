@@ -132,13 +132,13 @@ def check_camera(station_config, skill_name: str, n_joints: int = 7, n_poses: in
     segment with the label image (module docstring). Raises ValueError when the station has
     no camera or the camera sees none of the object in some frame."""
     from drake_skill.perception.systems import segmenter_config_for_station
-    from drake_skill.station.sim.builder import build_station
+    from drake_skill.station.make import make_station
 
     if n_joints < 1 or n_poses < 1:
         raise ValueError(f"--joints/--poses: expected at least 1 each, got {n_joints}, {n_poses}")
     if not station_config.enable_camera:
         raise ValueError("the scenario has enable_camera: false; the camera check needs the camera")
-    station = build_station(station_config)
+    station = make_station(station_config)
     seg_config = segmenter_config_for_station(station_config, station.object_camera.window)
     labels = object_labels(station)
     context = station.CreateDefaultContext()

@@ -26,7 +26,7 @@ from pydrake.multibody.tree import FixedOffsetFrame
 from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, LeafSystem
 
 from drake_skill.station import limits
-from drake_skill.station.models import add_package_paths, hand_mount, robot_directives
+from drake_skill.station.models import add_package_paths, hand_mount, instance_directives, robot_directives
 from drake_skill.station.config import ControllerConfig
 
 # Hand frame H is the flange turned -45 degrees about z (Franka Hand mounting; the
@@ -43,30 +43,36 @@ PANDA_QD_MAX = limits.QD_MAX
 FINGER_ACCEL_MAX = 4.0
 
 
-def _robot_plant(plant: MultibodyPlant, instances) -> None:
+def add_scenario_instances(plant: MultibodyPlant, instances, directives=None) -> list:
+    """Adds the model instances ``instances`` of ``directives`` (a scenario's; default the robot's
+    own, ``station.models.ROBOT_FILE``) to an unfinalised ``plant``, with their welds; returns them.
+    Drake's ``MakeMultibodyPlant(scenario, model_instance_names)`` in the ``manipulation``
+    repository: the auxiliary plants (gravity compensation, the controller's kinematics, the
+    hardware station's drawing) come from the station's own scenario, so a changed mount cannot
+    drift between them."""
     parser = Parser(plant)
     add_package_paths(parser.package_map())
-    ProcessModelDirectives(ModelDirectives(directives=robot_directives(instances)), plant, parser)
+    kept = robot_directives(instances) if directives is None else instance_directives(directives, instances)
+    ProcessModelDirectives(ModelDirectives(directives=kept), plant, parser)
+    return [plant.GetModelInstanceByName(name) for name in instances]
 
 
-def add_arm_and_hand(plant: MultibodyPlant) -> tuple:
-    """Adds the Panda arm (base welded to the world) and its hand (welded to the
-    flange with ``X_FLANGE_HAND``) to an unfinalised ``plant`` from the robot's
-    directives (``station.models.ROBOT_FILE``); returns the two model instances.
-    The stations' own plants come from the scenario's directives, which include
-    the same file; this is for the auxiliary plants (gravity compensation, the
-    hardware station's drawing) that need the same arm and hand."""
-    _robot_plant(plant, ("panda", "panda_hand"))
-    return plant.GetModelInstanceByName("panda"), plant.GetModelInstanceByName("panda_hand")
+def add_arm_and_hand(plant: MultibodyPlant, directives=None) -> tuple:
+    """Adds the Panda arm (base welded to the world) and its hand (welded to the flange) of
+    ``directives`` (a scenario's; default the robot's own) to an unfinalised ``plant``; returns
+    the two model instances."""
+    arm, hand = add_scenario_instances(plant, ("panda", "panda_hand"), directives)
+    return arm, hand
 
 
-def make_control_plant() -> MultibodyPlant:
-    """A 7-DoF kinematic model of the arm (the robot's directives, the arm alone) with the TCP
-    frame named ``ee``."""
+def make_control_plant(directives=None) -> MultibodyPlant:
+    """A 7-DoF kinematic model of the arm (``panda`` of ``directives``, a scenario's; default the
+    robot's own) with the TCP frame named ``ee``: the hand's mount (the scenario's weld) then
+    ``X_HAND_TCP``."""
     plant = MultibodyPlant(time_step=0.0)
-    _robot_plant(plant, ("panda",))
-    plant.AddFrame(FixedOffsetFrame("ee", plant.GetFrameByName("panda_link8"),
-                                    X_FLANGE_HAND @ X_HAND_TCP))
+    add_scenario_instances(plant, ("panda",), directives)
+    X_8H = X_FLANGE_HAND if directives is None else hand_mount(directives)
+    plant.AddFrame(FixedOffsetFrame("ee", plant.GetFrameByName("panda_link8"), X_8H @ X_HAND_TCP))
     plant.Finalize()
     return plant
 
@@ -260,13 +266,14 @@ class EndEffectorController(Diagram):
     translational speed is limited to ``config.ee_speed_max`` m/s; the
     commanded joint motion passes the :class:`RateLimiter` at Franka's
     velocity, acceleration and jerk limits (updated every ``update_period``,
-    see :class:`RateLimiter`).
+    see :class:`RateLimiter`). The arm's kinematics are those of ``directives``
+    (the scenario's; :func:`make_control_plant`).
     """
 
-    def __init__(self, config: ControllerConfig, q_home, update_period: float | None = None):
+    def __init__(self, config: ControllerConfig, q_home, update_period: float | None = None, directives=None):
         super().__init__()
         builder = DiagramBuilder()
-        self.control_plant = make_control_plant()
+        self.control_plant = make_control_plant(directives)
         plant = self.control_plant
         q_home = np.asarray(q_home, dtype=float)
         # The integrator's default state is the positions in this context.

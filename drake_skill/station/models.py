@@ -20,7 +20,7 @@ from pathlib import Path
 from drake_skill.resources import model_path, models_dir
 
 __all__ = ["PACKAGE_NAME", "PANDA_ILLUSTRATION", "add_package_paths", "add_panda_illustration", "model_path",
-           "model_url", "models_dir", "panda_illustration_table", "process_directives"]
+           "instance_directives", "model_url", "models_dir", "panda_illustration_table", "process_directives"]
 
 PACKAGE_NAME = "drake_skill_models"
 """The Drake (package.xml) package name of the models folder."""
@@ -118,24 +118,42 @@ ROBOT_FILE = "panda_robot.dmd.yaml"
 """The robot's model directives (the arm and its hand; models folder): the one definition."""
 
 
-def robot_directives(instances=("panda", "panda_hand")) -> list:
-    """``ROBOT_FILE``'s directives that add or weld the model instances ``instances`` (as Drake's
-    ``MakeMultibodyPlant(scenario, model_instance_names)`` keeps a scenario's): a controller's plant of
-    the arm alone takes ``("panda",)``."""
-    from pydrake.multibody.parsing import LoadModelDirectives
+def instance_directives(directives, instances) -> list:
+    """The directives of ``directives`` (a scenario's, ``add_directives`` included: flattened with
+    Drake's ``FlattenModelDirectives``) that add or weld the model instances ``instances``, as the
+    ``manipulation`` repository's ``MakeMultibodyPlant(scenario, model_instance_names)`` keeps a
+    scenario's: a controller's plant of the arm alone takes ``("panda",)``. A weld is kept when its
+    child is one of them."""
+    from pydrake.multibody.parsing import FlattenModelDirectives, ModelDirectives, PackageMap
 
+    package_map = PackageMap()
+    add_package_paths(package_map)
+    flat = FlattenModelDirectives(ModelDirectives(directives=list(directives)), package_map).directives
     kept = []
-    for d in LoadModelDirectives(str(model_path(ROBOT_FILE))).directives:
-        name = d.add_model.name if d.add_model is not None else d.add_weld.child.split("::")[0]
+    for d in flat:
+        name = (d.add_model.name if d.add_model is not None else
+                d.add_weld.child.split("::")[0] if d.add_weld is not None else None)
         if name in instances:
             kept.append(d)
+    missing = set(instances) - {d.add_model.name for d in kept if d.add_model is not None}
+    if missing:
+        raise ValueError(f"the directives add no model instance named {', '.join(sorted(missing))}")
     return kept
 
 
-def hand_mount():
-    """X_FH, the hand's pose on the flange (``panda_link8``), from ``ROBOT_FILE``'s weld."""
-    (weld,) = [d.add_weld for d in robot_directives() if d.add_weld is not None
-               and d.add_weld.child == "panda_hand::panda_hand"]
+def robot_directives(instances=("panda", "panda_hand")) -> list:
+    """``ROBOT_FILE``'s directives that add or weld the model instances ``instances``
+    (:func:`instance_directives` of the robot's own file)."""
+    from pydrake.multibody.parsing import LoadModelDirectives
+
+    return instance_directives(LoadModelDirectives(str(model_path(ROBOT_FILE))).directives, instances)
+
+
+def hand_mount(directives=None):
+    """X_FH, the hand's pose on the flange (``panda_link8``): the weld of ``panda_hand::panda_hand``
+    in ``directives`` (a scenario's; default ``ROBOT_FILE``'s), the one place it is written."""
+    kept = robot_directives() if directives is None else instance_directives(directives, ("panda_hand",))
+    (weld,) = [d.add_weld for d in kept if d.add_weld is not None and d.add_weld.child == "panda_hand::panda_hand"]
     return weld.X_PC.GetDeterministicValue()
 
 

@@ -231,7 +231,7 @@ class _Reposer:
         self.skill, self.config, self.station = skill, station_config, None
 
     def __call__(self, demo) -> SegmentTrack | None:
-        from drake_skill.station.sim.builder import build_station
+        from drake_skill.station.make import make_station
 
         if demo.metadata.get("source") in ROBOT_SOURCES:
             return None
@@ -240,7 +240,7 @@ class _Reposer:
         if not self.config.enable_camera:
             return None
         if self.station is None:
-            self.station = build_station(self.config)
+            self.station = make_station(self.config)
         return track_segment(self.station, demo)
 
 

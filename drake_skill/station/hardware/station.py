@@ -233,11 +233,12 @@ class StatusMonitor(LeafSystem):
 
 
 class ForwardKinematics(LeafSystem):
-    """``panda_state`` (14) in, ``X_WE`` out: the TCP pose of the kinematic arm model."""
+    """``panda_state`` (14) in, ``X_WE`` out: the TCP pose of the kinematic arm model of
+    ``directives`` (the scenario's; default the robot's own)."""
 
-    def __init__(self):
+    def __init__(self, directives=None):
         super().__init__()
-        self._plant = make_control_plant()
+        self._plant = make_control_plant(directives)
         self._frame = self._plant.GetFrameByName("ee")
         # Scratch memory for the kinematics, not run state: every evaluation
         # writes all positions before reading.
@@ -491,7 +492,7 @@ class HardwareStation(Diagram):
         builder.Connect(receiver.get_position_measured_output_port(), state.get_input_port(0))
         builder.Connect(receiver.get_velocity_measured_output_port(), state.get_input_port(1))
         builder.ExportOutput(state.get_output_port(), "panda_state")
-        fk = self._forward_kinematics = builder.AddNamedSystem("ee_pose", ForwardKinematics())
+        fk = self._forward_kinematics = builder.AddNamedSystem("ee_pose", ForwardKinematics(config.directives))
         builder.Connect(state.get_output_port(), fk.get_input_port())
         builder.ExportOutput(fk.get_output_port(), "ee_pose")
         self._receiver = receiver
@@ -501,7 +502,7 @@ class HardwareStation(Diagram):
         clip = builder.AddNamedSystem("workspace_clip", WorkspaceClip(ws.lower, ws.upper))
         builder.ExportInput(clip.get_input_port(), "ee_pose_desired")
         controller = builder.AddNamedSystem("ee_controller", EndEffectorController(
-            config.controller, config.q_home))
+            config.controller, config.q_home, directives=config.directives))
         self.ee_controller = controller
         builder.Connect(clip.get_output_port(), controller.GetInputPort("X_WE_desired"))
         q_only = builder.AddNamedSystem("q_commanded", _Selector(2 * N_JOINTS, N_JOINTS))
@@ -608,23 +609,18 @@ class HardwareStation(Diagram):
     def _add_meshcat(self, builder, meshcat, q_port, opening_input) -> None:
         """The arm, hand and table of the scenario in Meshcat, posed by the measured joints."""
         from pydrake.geometry import MeshcatVisualizer, MeshcatVisualizerParams, Role, SceneGraph
-        from pydrake.multibody.parsing import Parser
         from pydrake.multibody.plant import MultibodyPlant
         from pydrake.systems.primitives import MatrixGain, PassThrough
         from pydrake.systems.rendering import MultibodyPositionToGeometryPose
 
-        from drake_skill.station.controller import add_arm_and_hand
-        from drake_skill.station.models import add_package_paths, add_panda_illustration, model_url
+        from drake_skill.station.controller import add_scenario_instances
+        from drake_skill.station.models import add_panda_illustration
 
         scene_graph = builder.AddNamedSystem("viz_scene_graph", SceneGraph())
         plant = MultibodyPlant(0.0)
         plant.RegisterAsSourceForSceneGraph(scene_graph)
-        arm, hand = add_arm_and_hand(plant)
-        parser = Parser(plant)
-        add_package_paths(parser.package_map())
-        table = parser.AddModels(url=model_url("table.sdf"))[0]
+        arm, hand, _ = add_scenario_instances(plant, ("panda", "panda_hand", "table"), self.config.directives)
         add_panda_illustration(plant, scene_graph, (arm, hand))
-        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("table_top", table))
         plant.Finalize()
         if plant.num_positions() != N_JOINTS + 2:
             raise AssertionError(f"the Meshcat model has {plant.num_positions()} positions, expected 9")

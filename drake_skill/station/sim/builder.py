@@ -89,10 +89,11 @@ _SURFACES = (
 )
 
 
-def make_gravity_plant() -> MultibodyPlant:
-    """Arm + hand (9 DoF: joints 1..7, fingers) as the station has them, for gravity compensation."""
+def make_gravity_plant(directives=None) -> MultibodyPlant:
+    """Arm + hand (9 DoF: joints 1..7, fingers) of ``directives`` (the scenario's; default the
+    robot's own), as the station has them, for gravity compensation."""
     plant = MultibodyPlant(time_step=0.0)
-    add_arm_and_hand(plant)
+    add_arm_and_hand(plant, directives)
     plant.Finalize()
     return plant
 
@@ -241,7 +242,7 @@ class Station(Diagram):
         builder.Connect(gripper.GetOutputPort("finger_state_desired"), plant.get_desired_state_input_port(hand))
         builder.ExportInput(gripper.GetInputPort("opening"), "gripper_command")
         # Gravity compensation: tau_g(q) of arm + hand as feed-forward actuation.
-        self._gravity_plant = make_gravity_plant()
+        self._gravity_plant = make_gravity_plant(config.directives)
         gravity = builder.AddNamedSystem("gravity_compensation", InverseDynamics(
             self._gravity_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
         mux = builder.AddNamedSystem("arm_hand_state", Multiplexer([14, 4]))
@@ -310,7 +311,7 @@ class Station(Diagram):
             builder.ExportInput(set_points.get_input_port(), "panda_state_desired")
             return None
         controller = builder.AddNamedSystem("ee_controller", EndEffectorController(
-            config.controller, np.asarray(config.q_home, dtype=float), config.time_step))
+            config.controller, np.asarray(config.q_home, dtype=float), config.time_step, config.directives))
         builder.Connect(controller.GetOutputPort("panda_state_desired"), desired)
         builder.ExportInput(controller.GetInputPort("X_WE_desired"), "ee_pose_desired")
         builder.ExportOutput(controller.GetOutputPort("joint_acceleration_commanded"),

@@ -210,7 +210,7 @@ class SimRobot:
 
             self._guide_source = builder.AddNamedSystem("guide_plan", PoseTrajectorySource())
             self._guide_controller = builder.AddNamedSystem("guide_controller", EndEffectorController(
-                station_config.controller, station_config.q_home))
+                station_config.controller, station_config.q_home, directives=station_config.directives))
             builder.Connect(self._guide_source.GetOutputPort("X_WE_desired"),
                             self._guide_controller.GetInputPort("X_WE_desired"))
             builder.Connect(self._guide_controller.GetOutputPort("panda_state_desired"),

@@ -24,7 +24,8 @@ from pydrake.systems.framework import DiagramBuilder
 from drake_skill.station.config import StationConfig
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
 from drake_skill.station.recording import RunLog, StationRecorder
-from drake_skill.station.sim.builder import Station, build_station
+from drake_skill.station.make import make_station
+from drake_skill.station.sim.builder import Station
 from drake_skill.station.success import judge_run, judge_success
 
 
@@ -37,7 +38,7 @@ class StationSimulation:
 
     def __init__(self, config: StationConfig | None = None, meshcat=None, perceive: bool = False):
         builder = DiagramBuilder()
-        self.station: Station = builder.AddNamedSystem("station", build_station(config, meshcat))
+        self.station: Station = builder.AddNamedSystem("station", make_station(config, meshcat=meshcat))
         self.config = self.station.config
         self.source = builder.AddNamedSystem("plan", PoseTrajectorySource())
         builder.Connect(self.source.GetOutputPort("X_WE_desired"),
