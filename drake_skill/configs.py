@@ -23,17 +23,19 @@ __all__ = ["bad", "load_typed"]
 
 def bad(what: str, field: str, value, expected: str) -> NoReturn:
     """Raises the one-line ValueError of a field that cannot work: ``what`` names the
-    configuration ("station config"), ``expected`` says what would work."""
+    configuration ("scenario"), ``expected`` says what would work."""
     raise ValueError(f"{what} field '{field}' = {value!r}: expected {expected}")
 
 
-def load_typed(schema, *, what: str, path: str | Path | None = None, data: str | None = None, defaults=None):
+def load_typed(schema, *, what: str, path: str | Path | None = None, data: str | None = None, defaults=None,
+               where: str | None = None):
     """``yaml_load_typed`` of a file (``path``) or a YAML string (``data``) into ``schema``.
 
     Keys left out keep ``defaults`` (else ``schema()``'s). A missing file is a
     FileNotFoundError; YAML that does not parse, an unknown key (a typo) or a
     value of the wrong type is a ValueError naming ``what``, the file and Drake's
-    reason. The result is not validated: call the schema's check after.
+    reason (``where`` names a string's source in the message; default "YAML"). The result is
+    not validated: call the schema's check after.
     """
     import yaml
     from pydrake.common.yaml import yaml_load_typed
@@ -44,7 +46,7 @@ def load_typed(schema, *, what: str, path: str | Path | None = None, data: str |
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"{what} {path}: no such file")
-    where = str(path) if path is not None else "YAML"
+    where = str(path) if path is not None else (where or "YAML")
     try:
         return yaml_load_typed(schema=schema, filename=None if path is None else str(path), data=data,
                                defaults=defaults if defaults is not None else schema())

@@ -78,17 +78,27 @@ def skill(value, option: str = "--skill"):
         raise ValueError(f"{option}: {e}") from None
 
 
-def station_config(skill, scenario: Path | None):
-    """The station of ``skill``: its shipped scenario, overridden by the user's ``--scenario`` YAML."""
-    from drake_skill.station.config import load_station_config
-    from drake_skill.skills import scenario_for_skill
-
-    if scenario is None:
-        return scenario_for_skill(skill)
-    input_file(scenario, "--scenario", "a station scenario YAML file (see drake_skill/station/scenarios/)")
+def scenario(base, path: Path | None = None, texts=(), option: str = "--scenario"):
+    """The scenario a command runs, layered once (``station.config.load_scenario``): ``base`` (a
+    skill's name, spec or file: its shipped scenario; or a Scenario), then the user's ``--scenario``
+    file ``path``, then the YAML ``texts`` in order (``--scenario-text``, and the command's flags
+    written as YAML). Every problem is one line naming the option, the file or text, and the field."""
     import yaml
 
+    from drake_skill.station.config import Scenario, load_scenario
+    from drake_skill.skills import scenario_for_skill
+
+    defaults = base if isinstance(base, Scenario) else scenario_for_skill(base)
+    if path is not None:
+        input_file(path, option, "a station scenario YAML file (see drake_skill/station/scenarios/)")
     try:
-        return load_station_config(scenario, defaults=scenario_for_skill(skill))
+        return load_scenario(path, overrides=list(texts), defaults=defaults)
     except (ValueError, yaml.YAMLError) as e:
-        raise ValueError(f"--scenario {scenario}: {' '.join(str(e).split())}") from e
+        label = f"{option} {path}" if path is not None else "--scenario-text"
+        raise ValueError(f"{label}: {' '.join(str(e).split())}") from e
+
+
+def station_config(skill, scenario_path: Path | None, texts=()):
+    """The station of ``skill``: its shipped scenario, overridden by the user's ``--scenario`` YAML
+    and ``--scenario-text`` (:func:`scenario`)."""
+    return scenario(skill, scenario_path, texts)

@@ -216,7 +216,7 @@ class Skill:
         return self.config.spec
 
     def station_config(self):
-        """The skill's scenario with its success rule (a fresh StationConfig)."""
+        """The skill's scenario with its success rule (a fresh Scenario)."""
         return self.config.spec.station_config()
 
     @property

@@ -9,7 +9,7 @@ import pytest
 from drake_skill.cli.main import main
 from drake_skill.configs import load_typed
 from drake_skill.learning.config import LearnConfig
-from drake_skill.station.config import StationConfig
+from drake_skill.station.config import Scenario
 
 
 @pytest.mark.parametrize("text, expected", [
@@ -26,9 +26,9 @@ def test_a_station_field_of_the_wrong_type_or_name_is_named(tmp_path, text, expe
     path = tmp_path / "scene.yaml"
     path.write_text(text)
     with pytest.raises(ValueError) as raised:
-        load_typed(StationConfig, what="station config", path=path)
+        load_typed(Scenario, what="scenario", path=path)
     message = str(raised.value)
-    assert message.startswith(f"station config ({path}): ") and expected in message and "\n" not in message
+    assert message.startswith(f"scenario ({path}): ") and expected in message and "\n" not in message
 
 
 def test_the_commands_name_the_field_in_one_line(tmp_path, capsys):
@@ -121,7 +121,7 @@ def test_a_scenario_file_with_a_bad_directive_is_one_line_naming_the_file(tmp_pa
 
 def test_a_scenario_including_a_missing_directives_file_names_the_scenario_and_the_field(tmp_path, capsys):
     _bad_scenario(tmp_path, capsys, ("package://drake_skill_models/panda_robot.dmd.yaml", "no_robot.dmd.yaml"),
-                  "station config field 'directives[0].add_directives.file' = 'file://",
+                  "scenario field 'directives[0].add_directives.file' = 'file://",
                   "no_robot.dmd.yaml does not exist)")
 
 
@@ -143,7 +143,7 @@ def _bad_scenario(tmp_path, capsys, edit, expected, end):
     code = main(["skills", str(skill), "--check-camera"])
     err = capsys.readouterr().err.strip()
     assert code == 2 and "\n" not in err and "Traceback" not in err
-    assert f"station config ({scenario}): {expected}" in err and err.endswith(end), err
+    assert f"scenario ({scenario}): {expected}" in err and err.endswith(end), err
 
 
 @pytest.mark.parametrize("edit, expected, end", [
@@ -152,7 +152,7 @@ def _bad_scenario(tmp_path, capsys, edit, expected, end):
     (("plant:", "driver: {lcm_url: memq://}\nplant:"), "field 'driver': unknown key 'lcm_url'; valid keys: (none) ",
      "or 'driver: !PandaLcmDriver {...}')"),
     (("add_model: {name: drawer,", "add_model: {name: cabinet,"),
-     "station config field 'object.model' = 'drawer': expected the name of a model the directives add ",
+     "scenario field 'object.model' = 'drawer': expected the name of a model the directives add ",
      "(cabinet, panda, panda_hand, table)"),
 ])
 def test_a_scenario_naming_an_unknown_driver_or_instance_is_one_line_naming_the_file(tmp_path, capsys, edit,
@@ -160,3 +160,20 @@ def test_a_scenario_naming_an_unknown_driver_or_instance_is_one_line_naming_the_
     """The driver is a scenario field (issue 46 item 2): an unknown type tag, or an untagged driver
     with another type's keys; and an object instance the directives do not add."""
     _bad_scenario(tmp_path, capsys, edit, expected, end)
+
+
+def test_scenario_text_overrides_are_layered_after_the_file_and_named_in_errors(tmp_path, capsys):
+    """--scenario FILE, then each --scenario-text in turn (issue 46 item 1: CLI flags are overrides
+    on the one Scenario); a bad override is one line naming the file, the override and the field."""
+    from drake_skill.inputs import scenario
+
+    path = tmp_path / "scene.yaml"
+    path.write_text("object: {x: 0.5}\nenable_camera: false\n")
+    config = scenario("draw", path, ["object: {x: 0.6}", "driver: !PandaLcmDriver {lcm_url: memq://}",
+                                     "driver: !PandaLcmDriver {status_timeout: 0.5}"])
+    assert (config.object.x, config.enable_camera) == (0.6, False)
+    assert (config.driver.lcm_url, config.driver.status_timeout) == ("memq://", 0.5)
+    assert main(["skills", "draw", "--check-camera", "--scenario", str(path), "--scenario-text", "object: {x: 3}"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"drake-skill: error: --scenario {path}: scenario ({path} + override 'object: {{x: 3}}'): "
+                          "scenario field 'object.x/object.y' = (3.0, 0.0)") and "\n" not in err, err

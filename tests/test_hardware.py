@@ -38,7 +38,7 @@ from drake_skill.station.sim.builder import build_station
 from drake_skill.skills import scenario_for_skill
 from drake_skill.station.hardware.station import (STATUS_CHECK_PERIOD, ReflexError, StaleStatusError, StatusMonitor,
                                           build_hardware_station)
-from drake_skill.station.config import load_station_config
+from drake_skill.station.config import load_scenario
 from drake_skill.station.drivers import PandaLcmDriver
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource
 from drake_skill.demos.scripted import scripted_plan
@@ -552,12 +552,12 @@ def test_simulated_driver_drops_old_commands_and_refuses_wrong_modes():
 
 def test_driver_errors_name_the_field():
     with pytest.raises(ValueError, match=r"field 'driver.status_timeout' = 0.0"):
-        load_station_config(data="driver: !PandaLcmDriver {status_timeout: 0.0}")
+        load_scenario(data="driver: !PandaLcmDriver {status_timeout: 0.0}")
     with pytest.raises(ValueError, match=r"field 'driver.workspace.lower/upper'"):
-        load_station_config(data="driver: !PandaLcmDriver {workspace: {lower: [0, 0, 0], upper: [1, -1, 1]}}")
+        load_scenario(data="driver: !PandaLcmDriver {workspace: {lower: [0, 0, 0], upper: [1, -1, 1]}}")
     with pytest.raises(ValueError, match="status_chanel"):
-        load_station_config(data="driver: !PandaLcmDriver {status_chanel: X}")
-    config = load_station_config(data="driver: !PandaLcmDriver {lcm_url: memq://, command_channel: FRANKA_CMD}")
+        load_scenario(data="driver: !PandaLcmDriver {status_chanel: X}")
+    config = load_scenario(data="driver: !PandaLcmDriver {lcm_url: memq://, command_channel: FRANKA_CMD}")
     assert config.driver.command_channel == "FRANKA_CMD" and config.driver.status_channel == "PANDA_STATUS"
 
 
@@ -607,10 +607,11 @@ def test_hardware_cli_against_sim_robot_in_another_process(tmp_path, tmp_path_fa
         cd {tmp_path}
         {robot} > robot_run.txt 2>&1 &
         ROBOT=$!
-        {cli} hardware run --skill-dir {skill_dir} --config hardware.yaml --yes --rollouts 1 --seed0 7 --out run \\
+        {cli} hardware run --skill-dir {skill_dir} --scenario hardware.yaml --yes --rollouts 1 --seed0 7 --out run \\
             > run.txt 2>&1 || echo "hardware run exit $?" >> run.txt
         kill -TERM $ROBOT; wait $ROBOT || true
         {cli} hardware record-demo --skill close --config hardware.yaml --yes --seed 7 --duration 3 --out demos \\
+            --scenario-text "driver: !PandaLcmDriver {{status_timeout: 0.5}}" \\
             > demo.txt 2>&1 &
         DEMO=$!
         {robot} --guide > robot.txt 2>&1 &
@@ -662,7 +663,7 @@ def test_one_factory_builds_each_driver_and_every_port_carries_what_its_name_say
     joints.GetInputPort("panda_state_desired").FixValue(context, np.r_[q, np.zeros(7)])
     plant_context = joints.plant.GetMyContextFromRoot(context)
     np.testing.assert_allclose(joints.plant.get_desired_state_input_port(joints.panda).Eval(plant_context)[:7], q)
-    with pytest.raises(ValueError, match=r"^station config: field 'driver' = !JointSetpointDriver: the hardware "
+    with pytest.raises(ValueError, match=r"^scenario: field 'driver' = !JointSetpointDriver: the hardware "
                                          r"station speaks the Panda driver's LCM protocol; give the scenario driver: "
                                          r"!PandaLcmDriver \{\.\.\.\}"):
         make_station(config, hardware=True)

@@ -101,12 +101,12 @@ def test_object_parts_and_each_error_naming_the_field():
     config.object.base_body = "box"
     with pytest.raises(ValueError) as e:
         object_parts(plant, obj, config)
-    assert str(e.value) == ("station config field 'object.base_body' = 'box': the model 'box' has no such body; "
+    assert str(e.value) == ("scenario field 'object.base_body' = 'box': the model 'box' has no such body; "
                             "expected one of box_base, box_lid")
     config.object.base_body, config.object.joint = "box_base", "hinge"
     with pytest.raises(ValueError) as e:
         object_parts(plant, obj, config)
-    assert str(e.value) == ("station config field 'object.joint' = 'hinge': the model 'box' has no such joint; "
+    assert str(e.value) == ("scenario field 'object.joint' = 'hinge': the model 'box' has no such joint; "
                             "expected one of lid_hinge")
     arm = scenario_for_skill("open")
     arm.object.model, arm.object.base_body, arm.object.joint = "panda", "panda_link0", "hinge"
@@ -119,7 +119,7 @@ def test_object_parts_and_each_error_naming_the_field():
     arm.object.model, arm.object.base_body, arm.object.joint = "panda", "panda_link0", "world_welds_to_panda_link0"
     with pytest.raises(ValueError) as e:
         object_parts(plant, plant.GetModelInstanceByName("panda"), arm)
-    assert str(e.value) == ("station config field 'object.joint' = 'world_welds_to_panda_link0': a weld joint of 0 "
+    assert str(e.value) == ("scenario field 'object.joint' = 'world_welds_to_panda_link0': a weld joint of 0 "
                             "positions; expected a revolute or prismatic joint")
 
 
@@ -148,7 +148,7 @@ def test_object_parts_initial_joint_within_the_limits_to_a_nanometre(initial, ok
         return
     with pytest.raises(ValueError) as e:
         object_parts(plant, obj, config)
-    assert str(e.value) == (f"station config field 'object.initial_joint' = {initial!r}: expected a position "
+    assert str(e.value) == (f"scenario field 'object.initial_joint' = {initial!r}: expected a position "
                             "within the joint's limits [0.0, 1.9]")
 
 

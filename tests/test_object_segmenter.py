@@ -19,14 +19,14 @@ from drake_skill.perception.systems import (
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
 from drake_skill.perception.segmentation import fit_table_plane
 from drake_skill.station.sim.builder import build_station
-from drake_skill.station.config import StationConfig
+from drake_skill.station.config import Scenario
 from drake_skill.skills import scenario_for_skill
 
 
 class Rig:
     """Station + plan source + segmenter in one diagram, reset like StationSimulation."""
 
-    def __init__(self, config: StationConfig, segmenter_config: ObjectSegmenterConfig | None = None):
+    def __init__(self, config: Scenario, segmenter_config: ObjectSegmenterConfig | None = None):
         builder = DiagramBuilder()
         self.station = builder.AddNamedSystem("station", build_station(config))
         self.source = builder.AddNamedSystem("plan", PoseTrajectorySource())
@@ -134,7 +134,7 @@ def test_hand_hiding_the_object_clears_the_flag_and_holds_outputs():
     The segment's rule is "largest": the hand cuts the box's visible rest into pieces of at
     most 600-800 pixels, each under min_points. Under the default "all_regions" the pieces
     together (about 1900 object pixels) are a valid, partial object."""
-    config = StationConfig()
+    config = Scenario()
     config.object.colour.cluster_rule = "largest"
     from pydrake.common.schema import Transform
     from drake_skill.common import look_at

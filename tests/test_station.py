@@ -10,7 +10,7 @@ from drake_skill.station.models import add_package_paths, model_url
 from drake_skill.station.pose_source import hold_plan
 from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.sim.simulation import StationSimulation
-from drake_skill.station.config import StationConfig, load_station_config
+from drake_skill.station.config import Scenario, load_scenario
 from drake_skill.skills import scenario_for_skill
 from drake_skill.station.success import judge_success
 
@@ -187,25 +187,25 @@ def test_object_state_port_reports_lid_angle():
 def test_bad_config_names_the_field(yaml_text, field):
     import re
     with pytest.raises(ValueError, match=re.escape(field)):
-        load_station_config(data=yaml_text)
+        load_scenario(data=yaml_text)
 
 
 def test_config_yaml_round_trip(tmp_path):
     path = tmp_path / "scenario.yaml"
     path.write_text("plant:\n  time_step: 0.001\nobject:\n  x: 0.68\ncamera:\n  fps: 5.0\n")
-    config = load_station_config(path)
+    config = load_scenario(path)
     assert config.object.joint == "lid_hinge" and config.object.x == 0.68
     assert config.time_step == 0.001 and config.camera.fps == 5.0
-    assert config.camera.width == StationConfig().camera.width
+    assert config.camera.width == Scenario().camera.width
     # Keys left out keep their defaults, including the plant's contact settings.
     assert config.plant.discrete_contact_approximation == "sap"
     with pytest.raises(FileNotFoundError, match="nope.yaml"):
-        load_station_config(tmp_path / "nope.yaml")
+        load_scenario(tmp_path / "nope.yaml")
 
 
 def test_shipped_scenarios_are_yaml_files_in_the_package():
     from drake_skill.skills import load_skill
-    from drake_skill.station.config import dump_station_config
+    from drake_skill.station.config import dump_scenario
     for skill, model, x, joint in (("open", "box", 0.60, 0.0), ("close", "box", 0.46, 1.9),
                                    ("draw", "drawer", 0.68, 0.0)):
         path = load_skill(skill).scenario_path()
@@ -215,8 +215,8 @@ def test_shipped_scenarios_are_yaml_files_in_the_package():
         assert (config.object.model, config.object.x, config.object.initial_joint) == (model, x, joint)
         assert config.object.gravity
         # The dump of a loaded scenario loads back to the same values.
-        again = load_station_config(data=dump_station_config(config))
-        assert dump_station_config(again) == dump_station_config(config)
+        again = load_scenario(data=dump_scenario(config))
+        assert dump_scenario(again) == dump_scenario(config)
 
 
 def test_object_joint_can_be_set():
@@ -231,7 +231,7 @@ def test_more_cameras_are_data_and_export_their_images():
     """A scenario's ``cameras`` render beside the perception camera, which stays the one perception reads."""
     from drake_skill.station.sim.builder import build_station
 
-    config = load_station_config(data="""
+    config = load_scenario(data="""
 cameras:
 - name: overhead
   width: 64
@@ -249,6 +249,6 @@ cameras:
     assert int(labels.data[24, 32, 0]) not in (0, 32767, 32766)
     assert station.GetOutputPort("point_cloud").Eval(context).size() == 640 * 480
     with pytest.raises(ValueError, match=r"cameras\[0\]\.name"):
-        load_station_config(data="cameras: [{name: kinect, renderer_name: vtk}]")
+        load_scenario(data="cameras: [{name: kinect, renderer_name: vtk}]")
     with pytest.raises(ValueError, match=r"cameras\[0\]\.renderer_name"):
-        load_station_config(data="cameras: [{name: top, renderer_name: gl}]")
+        load_scenario(data="cameras: [{name: top, renderer_name: gl}]")

@@ -48,7 +48,7 @@ def initial_skill(skill: str, out: Path, quiet: bool) -> Path:
 def one_run(skill_dir: Path, out: Path, seed: int, args, log) -> dict:
     from drake_skill.learning.loop import LearnConfig, learn
     from drake_skill.skill import Skill
-    from drake_skill.station.config import load_station_config
+    from drake_skill.station.config import load_scenario
     from drake_skill.skills import scenario_for_skill
 
     if (out / "summary.json").is_file():
@@ -56,7 +56,7 @@ def one_run(skill_dir: Path, out: Path, seed: int, args, log) -> dict:
     resume = (out / "checkpoint" / "state.json").is_file()
     station = scenario_for_skill(Skill.load(skill_dir).name)
     if args.station_config is not None:
-        station = load_station_config(args.station_config, defaults=station)
+        station = load_scenario(args.station_config, defaults=station)
     config = LearnConfig(seed=seed, episodes=args.episodes, rollouts=args.rollouts, held_out=args.held_out,
                          weighting=args.weighting)
     start = time.perf_counter()
@@ -76,7 +76,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, default=Path("results") / "check_learning")
     smoke = parser.add_argument_group("smoke test (not the check: the issue's figures use the defaults)")
     smoke.add_argument("--skill-dir", type=Path, help="start every run from this fitted skill")
-    smoke.add_argument("--station-config", type=Path, help="StationConfig YAML")
+    smoke.add_argument("--station-config", type=Path, help="Scenario YAML")
     smoke.add_argument("--episodes", type=int, default=5)
     smoke.add_argument("--rollouts", type=int, default=6)
     smoke.add_argument("--held-out", type=int, default=10)

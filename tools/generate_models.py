@@ -172,7 +172,7 @@ def _geometry(name, centre, rpy, color, visual_geom, collision_geom) -> str:
     """An SDF visual (when ``visual_geom``) and collision (when ``collision_geom``) at one pose.
 
     Contact parameters (friction, stiffness, dissipation) are not written here:
-    the station sets them per surface from its scenario (``StationConfig.contact``).
+    the station sets them per surface from its scenario (``Scenario.contact``).
     """
     out = ""
     if visual_geom:

@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_skill.cli import errors
+from drake_skill.cli import errors, options
 from drake_skill.fileio import write_figure_png
 
 FORMATS = ("robomimic",)   # drake_skill.demos.robomimic.FORMATS (not imported here: --help stays light)
@@ -81,8 +81,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="skip the camera (much faster; the files then have no perception fields)")
     rec.add_argument("--config", type=Path,
                      help="YAML file of DemonstratorConfig fields (variation, rates, attempts)")
-    rec.add_argument("--scenario", type=Path,
-                     help="station scenario YAML (keys left out keep the skill's shipped scenario)")
+    options.add_scenario(rec, what="the skill's shipped scenario", dest="scenario")
     rec.add_argument("--force", action="store_true",
                      help="replace the demonstrations already in --out (the whole set at once)")
     rec.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -100,8 +99,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     rp = action("replay", "a standalone Meshcat HTML replay per demonstration", replay)
     rp.add_argument("dir", type=Path, metavar="DIR", help="a demonstration folder (demo_NNN.npz)")
     rp.add_argument("--out", type=Path, default=None, help="folder for demo_NNN.html (default DIR_replay, beside DIR)")
-    rp.add_argument("--scenario", type=Path,
-                    help="station scenario YAML (keys left out keep the skill's shipped scenario)")
+    options.add_scenario(rp, what="the skill's shipped scenario", dest="scenario")
     ex = action("export", "write a folder's demonstrations as one dataset file", export)
     ex.add_argument("--format", choices=FORMATS, default="robomimic", help="dataset layout (default robomimic)")
     ex.add_argument("dir", type=Path, metavar="DIR", help="a demonstration folder (demo_NNN.npz)")
@@ -198,7 +196,8 @@ def record(args) -> int:
         errors.input_file(args.config, "--config", "a YAML file of DemonstratorConfig fields")
     config = load_demonstrator_config(args.config) if args.config else DemonstratorConfig()
     spec = errors.skill(args.skill)
-    station_config = errors.station_config(spec, args.scenario) if args.scenario else None
+    station_config = errors.station_config(spec, args.scenario, args.scenario_text) \
+        if args.scenario or args.scenario_text else None
     count = args.count or config.count or int(spec.demonstrations)
     seed = config.seed if args.seed is None else args.seed
     config = dc.replace(config, count=count, seed=seed, record_perception=not args.no_camera)
@@ -291,7 +290,7 @@ def replay(args) -> int:
     configs = {}
     for d in demos:
         if d.skill not in configs:
-            configs[d.skill] = errors.station_config(d.skill, args.scenario)
+            configs[d.skill] = errors.station_config(d.skill, args.scenario, args.scenario_text)
     from pydrake.geometry import Meshcat
     meshcat = Meshcat()
     written = [write_replay(d, out / Path(d.path).with_suffix(".html").name, configs[d.skill], meshcat)

@@ -73,8 +73,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--exploration-scale", type=float, default=None, metavar="S",
                         help=f"with --explore: sample from S x Sigma_0 (default: the skill's, as "
                              f"drake-skill learn: {exploration_scales_text()})")
-    parser.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE",
-                        help="scenario YAML (StationConfig; default: the skill's scenario)")
+    options.add_scenario(parser, "--station-config", what="the skill's scenario")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON report (default SKILL/evaluation.json); the placement plot goes beside it "
                              "with the suffix .png")
@@ -87,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     from drake_skill.learning.evaluation import evaluate_skill, evaluation_table
     from drake_skill.learning.plots import plot_outcomes_by_placement
     from drake_skill.skill import Skill
-    from drake_skill.station.config import load_station_config
+    from drake_skill.inputs import scenario
 
     if args.poses < 1:
         raise ValueError(f"--poses must be at least 1, got {args.poses}")
@@ -102,9 +101,7 @@ def run(args: argparse.Namespace) -> int:
                                  "(drake-skill fit --out / drake-skill learn --out .../skill)")
     if args.explore < 0:
         raise ValueError(f"--explore must be a number of rollouts >= 1, got {args.explore}")
-    station = Skill.load(args.skill_dir).station_config()
-    if args.station_config is not None:
-        station = load_station_config(args.station_config, defaults=station)
+    station = scenario(Skill.load(args.skill_dir).station_config(), args.station_config, args.scenario_text)
     rollout_config = options.rollout_config(args)
     if args.explore:
         from drake_skill.learning.evaluation import exploration_table, explore_skill

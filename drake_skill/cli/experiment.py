@@ -108,7 +108,7 @@ def _add_run_arguments(run_p: argparse.ArgumentParser) -> None:
     budget.add_argument("--skill-dir", type=Path, default=None,
                         help="start from this fitted skill instead of recording and fitting (one skill)")
     budget.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE",
-                        help="scenario YAML over each skill's scenario (StationConfig)")
+                        help="scenario YAML over each skill's scenario (Scenario)")
     options.add_ground_truth_pose(budget)
     where = run_p.add_argument_group("where")
     where.add_argument("--workers", type=int, default=None,

@@ -1,11 +1,11 @@
 """``drake-skill hardware``: a skill on a real Panda through the drake-franka-driver's LCM.
 
-    drake-skill hardware run --skill-dir DIR [--lcm-url URL] [--config scenario.yaml]
+    drake-skill hardware run --skill-dir DIR [--lcm-url URL] [--scenario FILE]
                              [--rollouts 1] [--seed0 0] [--episodes E] [--out DIR] [--yes]
-    drake-skill hardware record-demo --skill open --out DIR [--lcm-url URL] [--config scenario.yaml]
+    drake-skill hardware record-demo --skill open --out DIR [--lcm-url URL] [--scenario FILE]
                              [--duration 15] [--seed 0] [--yes]
     drake-skill hardware refine --skill-dir DIR --demos DIR [--iterations 1] [--out DIR]
-                             [--lcm-url URL] [--config scenario.yaml] [--yes]
+                             [--lcm-url URL] [--scenario FILE] [--yes]
 
 The same diagram as in simulation, with the simulated station swapped for
 the hardware station (``drake_skill.station.hardware.station``): position commands
@@ -100,9 +100,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     refine_p.add_argument("--force", action="store_true", help="replace a skill already in --out")
     for p in (run_p, demo_p, refine_p):
         p.add_argument("--lcm-url", default=None, help="LCM URL (default: the config's, or LCM's default)")
-        p.add_argument("--config", type=Path, metavar="SCENARIO",
-                       help="a scenario YAML laid over the skill's: driver: !PandaLcmDriver {channels, URL, "
-                            "timeouts, workspace}, camera, object...")
+        options.add_scenario(p, "--config", what="the skill's (its driver a !PandaLcmDriver: channels, URL, "
+                             "timeouts, workspace)")
         p.add_argument("--yes", action="store_true", help="do not wait for Enter before each rollout")
 
 
@@ -138,7 +137,7 @@ def _run(args) -> int:
         raise NotADirectoryError(f"--skill-dir {args.skill_dir}: not a folder; "
                                  "give a skill folder (drake-skill fit --out)")
     skill = Skill.load(args.skill_dir)
-    config = load_config(args.config, args.lcm_url, skill.name)
+    config = load_config(args.station_config, args.lcm_url, skill.name, texts=args.scenario_text)
     camera = config.enable_camera
     rollout = options.rollout_config(args, camera=camera)
     out = args.out if args.out is not None else args.skill_dir / "hardware_run"
@@ -197,7 +196,7 @@ def _record_demo(args) -> int:
     skill_name = errors.skill(args.skill).name
     if existing_demo_files(args.out):   # a set that does not load (mixed, other skill) is refused before recording
         load_demonstrations(args.out, skill=skill_name)
-    config = load_config(args.config, args.lcm_url, args.skill, camera=not args.no_camera)
+    config = load_config(args.station_config, args.lcm_url, args.skill, not args.no_camera, args.scenario_text)
     if not config.driver.ground_truth_channel:
         raise ValueError("record-demo needs the object's state over time: set ground_truth_channel "
                          "(a sensor on the hinge/slide, or sim-robot, publishes lcmt_scope there)")
@@ -274,7 +273,7 @@ def _refine(args) -> int:
     skill = Skill.load(args.skill_dir)
     demos = load_demonstrations(args.demos, skill=skill.name)
     check_demo_pairs(skill, demos, f"--demos {args.demos}")
-    config = load_config(args.config, args.lcm_url, skill.name)
+    config = load_config(args.station_config, args.lcm_url, skill.name, texts=args.scenario_text)
     config.enable_camera = False           # the placed pose is the object frame: no camera needed
     station = make_station(config, hardware=True)
     runs = len(demos) * (args.iterations + 1)

@@ -109,15 +109,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument("--meshcat", action="store_true", help="watch the greedy executions live in Meshcat")
     run.add_argument("--no-replay", action="store_true", help="do not write the Meshcat HTML replays")
     options.add_ground_truth_pose(run)
-    run.add_argument("--scenario", "--station-config", dest="station_config", type=Path, metavar="FILE",
-                     help="scenario YAML (StationConfig; default: the skill's scenario)")
+    options.add_scenario(run, "--station-config", what="the skill's scenario (and --config's station)")
     run.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
 def _station_config(args, skill):
     """The skill's scenario, under the --config file's ``station`` and then --scenario."""
     from drake_skill.configs import load_typed
-    from drake_skill.station.config import load_station_config, validate_station_config
+    from drake_skill.station.config import validate_scenario
     from drake_skill.skills import scenario_for_skill
 
     station = scenario_for_skill(skill)
@@ -126,12 +125,12 @@ def _station_config(args, skill):
         station = load_typed(LearnFile, what="--config", path=args.config,
                              defaults=LearnFile(station=station)).station
         try:
-            validate_station_config(station)
+            validate_scenario(station)
         except ValueError as e:
             raise ValueError(f"--config {args.config}: station: {e}") from None
-    if args.station_config is None:
-        return station
-    return load_station_config(args.station_config, defaults=station)
+    from drake_skill.inputs import scenario
+
+    return scenario(station, args.station_config, args.scenario_text)
 
 
 _FILE_FLAGS = ("skill", "skill_dir", "demos", "out")

@@ -7,7 +7,7 @@ field types at run time.)
     out: results/learn/open
     workers: 2
     learn: {method: pi2-es-cov, reward: dense, episodes: 5, rollouts: 6, seed: 0, held_out: 10}
-    station:                     # overrides of the skill's scenario (StationConfig's keys)
+    station:                     # overrides of the skill's scenario (Scenario's keys)
       object: {x: 0.62}
 
 Flags given on the command line override the file; ``--print-config`` prints
@@ -17,7 +17,7 @@ the effective settings (the station in full) and runs nothing.
 import dataclasses as dc
 
 from drake_skill.learning.loop import LearnConfig
-from drake_skill.station.config import StationConfig
+from drake_skill.station.config import Scenario
 
 __all__ = ["LearnFile"]
 
@@ -35,4 +35,4 @@ class LearnFile:
     out: str = ""
     workers: int = 0
     learn: LearnConfig = dc.field(default_factory=LearnConfig)
-    station: StationConfig = dc.field(default_factory=StationConfig)
+    station: Scenario = dc.field(default_factory=Scenario)

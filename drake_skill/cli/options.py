@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 __all__ = ["add_ground_truth_pose", "rollout_config"]
 
@@ -14,6 +15,16 @@ def add_ground_truth_pose(parser, on_robot: bool = False) -> None:
     where = "the placed pose" if on_robot else "the simulator's ground truth"
     parser.add_argument("--ground-truth-pose", action="store_true",
                         help=f"object frame from {where} instead of the camera's segmenter")
+
+
+def add_scenario(parser, *names: str, what: str = "the skill's scenario", dest: str = "station_config") -> None:
+    """``--scenario FILE`` (also ``names``) and ``--scenario-text YAML`` (repeatable): the scenario
+    a command runs is ``what``, then the file, then each text in turn (``inputs.scenario``)."""
+    parser.add_argument("--scenario", *names, dest=dest, type=Path, metavar="FILE", default=None,
+                        help=f"a scenario YAML laid over {what} (keys left out keep its values)")
+    parser.add_argument("--scenario-text", action="append", default=[], metavar="YAML",
+                        help="YAML laid over the scenario after --scenario, e.g. 'enable_camera: false' "
+                             "or 'driver: !PandaLcmDriver {lcm_url: \"memq://\"}' (repeatable, in order)")
 
 
 def rollout_config(args: argparse.Namespace, camera: bool = True):

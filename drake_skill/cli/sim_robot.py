@@ -1,6 +1,6 @@
 """``drake-skill sim-robot``: a simulated Panda that speaks the drake-franka-driver's LCM protocol.
 
-    drake-skill sim-robot --skill SKILL [--lcm-url URL] [--seed N] [--config hardware.yaml]
+    drake-skill sim-robot --skill SKILL [--lcm-url URL] [--seed N] [--scenario FILE] [--scenario-text YAML]
                           [--no-camera] [--duration S] [--guide]
 
 Runs the simulated station in real time behind Drake's PandaCommandReceiver /
@@ -10,8 +10,8 @@ clock are dropped, as the driver does), publishes lcmt_panda_status on
 PANDA_STATUS every plant step, the camera's images (lcmt_image_array) on
 DRAKE_RGBD_CAMERA_IMAGES at the camera rate and the object state (lid angle
 / drawer travel, lcmt_scope) on SIM_OBJECT_STATE; channels and URL from
---config (a scenario YAML laid over the skill's, its ``driver: !PandaLcmDriver
-{...}``) or the defaults. The object is placed at
+--scenario (a scenario YAML laid over the skill's, its ``driver: !PandaLcmDriver
+{...}``; ``--config`` is the same option) or the defaults. The object is placed at
 the pose drawn from --seed, as ``drake-skill hardware run --seed0`` expects.
 
 --guide plays the skill's scripted, human-like demonstration on the arm (a
@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import argparse
 import signal
-from pathlib import Path
+
+from drake_skill.cli import options
 
 NAME = "sim-robot"
 HELP = "a simulated Panda behind the driver's LCM protocol (for hardware run / record-demo)"
@@ -38,38 +39,40 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--skill", required=True, metavar="SKILL",
                         help="the skill whose scenario the robot stands in (a shipped skill's name or a skill file)")
     parser.add_argument("--seed", type=int, default=None, help="object pose seed (default: the nominal pose)")
-    parser.add_argument("--config", type=Path, metavar="SCENARIO",
-                        help="a scenario YAML laid over the skill's: the driver's channels and URL "
-                             "(driver: !PandaLcmDriver {...}), camera, object...")
+    options.add_scenario(parser, "--config", what="the skill's (its driver a !PandaLcmDriver: channels, URL, "
+                         "timeouts)")
     parser.add_argument("--no-camera", action="store_true", help="no camera (faster; no images published)")
     parser.add_argument("--duration", type=float, default=float("inf"), help="stop after this many seconds")
     parser.add_argument("--guide", action="store_true",
                         help="play the skill's scripted demonstration on the arm (kinesthetic stand-in)")
 
 
-def load_config(path, lcm_url, skill, camera: bool = True):
-    """The scenario of the CLI options: the skill's, with a ``!PandaLcmDriver``, then the file
-    ``path`` laid over it (a scenario overlay, e.g. ``driver: !PandaLcmDriver {lcm_url: ...}``),
-    then ``--lcm-url`` and ``--no-camera``."""
+def load_config(path, lcm_url, skill, camera: bool = True, texts=()):
+    """The scenario of the CLI options, layered once (``inputs.scenario``): the skill's, with a
+    ``!PandaLcmDriver``; then the ``--scenario`` file ``path``; then ``--scenario-text``; then
+    ``--lcm-url`` and ``--no-camera``, written as YAML overrides."""
+    import json
+
     from drake_skill.cli import errors
-    from drake_skill.station.config import load_station_config, validate_station_config
+    from drake_skill.inputs import scenario
     from drake_skill.station.drivers import PandaLcmDriver, require_panda_driver
 
-    defaults = errors.skill(skill).station_config()
-    defaults.driver = PandaLcmDriver()
-    config = load_station_config(path, defaults=defaults) if path is not None else defaults
-    require_panda_driver(config, "the robot", str(path))
+    base = errors.skill(skill).station_config()
+    base.driver = PandaLcmDriver()
+    texts = list(texts)
     if lcm_url is not None:
-        config.driver.lcm_url = lcm_url
+        texts.append(f"driver: !PandaLcmDriver {{lcm_url: {json.dumps(lcm_url)}}}")
     if not camera:
-        config.enable_camera = False
-    return validate_station_config(config)
+        texts.append("enable_camera: false")
+    config = scenario(base, path, texts)
+    require_panda_driver(config, "the robot", "" if path is None else str(path))
+    return config
 
 
 def run(args: argparse.Namespace) -> int:
     if not args.duration > 0:
         raise ValueError(f"--duration must be positive, got {args.duration}")
-    config = load_config(args.config, args.lcm_url, args.skill, camera=not args.no_camera)
+    config = load_config(args.station_config, args.lcm_url, args.skill, not args.no_camera, args.scenario_text)
 
     from drake_skill.cli import errors
     from drake_skill.station.sim.lcm_robot import SimRobot

@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
+
+from drake_skill.cli import options
 
 NAME = "skills"
 HELP = "list the shipped skills, or check and show a skill file"
@@ -42,8 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--poses", type=int, default=3, metavar="N",
                         help="with --check-camera: seeded object poses (default 3)")
     parser.add_argument("--seed", type=int, default=0, help="with --check-camera: seed of the first pose")
-    parser.add_argument("--scenario", type=Path, default=None, metavar="FILE",
-                        help="with --check-camera: a scenario YAML over the skill's scenario")
+    options.add_scenario(parser, what="the skill's scenario (with --check-camera)", dest="scenario")
 
 
 def table(specs) -> str:
@@ -92,7 +92,7 @@ def check_camera(args: argparse.Namespace) -> int:
     if args.joints < 1 or args.poses < 1:
         raise ValueError(f"--joints {args.joints} / --poses {args.poses}: expected at least 1 each")
     spec = errors.skill(args.skill, "SKILL")
-    config = errors.station_config(spec, args.scenario)
+    config = errors.station_config(spec, args.scenario, args.scenario_text)
     result = camera_check.check_camera(config, spec.name, args.joints, args.poses, args.seed)
     print(json.dumps(result.summary()) if args.json else camera_check.table(result))
     return 0

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_skill.cli import errors
+from drake_skill.cli import errors, options
 from drake_skill.fileio import atomic_write_json, write_figure_png
 
 NAME = "station-demo"
@@ -92,8 +92,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="object pose seed (default 0)")
     parser.add_argument("--out", type=Path, default=Path("results/station_demo"),
                         help="output folder (default results/station_demo)")
-    parser.add_argument("--scenario", type=Path,
-                        help="station scenario YAML (keys left out keep each skill's shipped scenario)")
+    options.add_scenario(parser, what="each skill's shipped scenario", dest="scenario")
     parser.add_argument("--meshcat", action="store_true",
                         help="show the simulation in Meshcat (prints the URL; runs in real time)")
 
@@ -105,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         args.skills = [spec.name for spec in shipped_skills() if spec.keyframes]
     if args.scenario is not None:
         for skill in args.skills:
-            errors.station_config(skill, args.scenario)
+            errors.station_config(skill, args.scenario, args.scenario_text)
     meshcat = None
     if args.meshcat:
         from pydrake.geometry import StartMeshcat

@@ -60,7 +60,7 @@ from drake_skill.station.recording import ReflexError, StationRecorder, pose_to_
 from drake_skill.station.sim.simulation import StationSimulation
 from drake_skill.station.success import judge_run
 from drake_skill.skills import SkillSpec, keyframes, load_skill
-from drake_skill.station.config import StationConfig
+from drake_skill.station.config import Scenario
 
 
 @dc.dataclass
@@ -92,7 +92,7 @@ class DemonstratorConfig:
       the object looks done.
     max_force_fraction: a demonstration whose peak robot-scene contact force
       exceeds this fraction of the collision reflex's limit
-      (``StationConfig.reflex.contact_force_max``) is rejected like a failed
+      (``Scenario.reflex.contact_force_max``) is rejected like a failed
       one, as a person who feels the hand press on the object starts again
       (1: keep every successful one). One accepted above
       ``drake_skill.demos.force_margin.FORCE_MARGIN`` (60 %) of the limit is
@@ -302,7 +302,7 @@ class ScriptedDemonstrator:
     """
 
     def __init__(self, skill, config: DemonstratorConfig | None = None,
-                 station_config: StationConfig | None = None, meshcat=None):
+                 station_config: Scenario | None = None, meshcat=None):
 
         self.spec = load_skill(skill)
         self.skill = self.spec.name

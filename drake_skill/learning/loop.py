@@ -624,6 +624,6 @@ def learn(skill_dir, out_dir, config: LearnConfig | None = None, *, station_conf
 
 
 def station_config_object_xyz(station_config) -> np.ndarray:
-    """Nominal object position of a StationConfig [m]."""
+    """Nominal object position of a Scenario [m]."""
     o = station_config.object
     return np.array([o.x, o.y, 0.0])

@@ -86,7 +86,7 @@ def replay_rollout(folder, name: str, index: int, out=None, *, stored: bool = Fa
 def _draw_stored(record, setup: dict, out: Path, meshcat) -> Replayed:
     from drake_skill.demos.replay import joints_replay_html
     from drake_skill.skill import Skill
-    from drake_skill.station.config import load_station_config
+    from drake_skill.station.config import load_scenario
 
     if "joints" not in record:
         raise ValueError("this rollout stored no joints (it failed before it was simulated); nothing to draw")
@@ -94,7 +94,7 @@ def _draw_stored(record, setup: dict, out: Path, meshcat) -> Replayed:
     X_WO = record["object_pose_true"] if np.all(np.isfinite(record["object_pose_true"])) else record["object_pose"]
     if not np.all(np.isfinite(X_WO)):
         raise ValueError("this rollout stored no object pose (it failed before perceiving one); nothing to place")
-    html = joints_replay_html(load_station_config(data=setup["station"]), X_WO, record["times"], record["joints"],
+    html = joints_replay_html(load_scenario(data=setup["station"]), X_WO, record["times"], record["joints"],
                               float(Skill.load(setup["skill_dir"]).gripper_opening), record["object_state"], meshcat)
     return Replayed(atomic_write_text(out, html), record)
 

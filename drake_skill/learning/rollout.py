@@ -59,7 +59,7 @@ from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
 from drake_skill.station.make import make_station
 from drake_skill.station.sim.builder import Station
-from drake_skill.station.config import StationConfig
+from drake_skill.station.config import Scenario
 from drake_skill.station.frames import add_camera_frames
 from drake_skill.station.records import StationLoggers
 from drake_skill.station.recording import advance_station, check_joint_state, pose_to_vector, vector_to_pose
@@ -300,7 +300,7 @@ class RolloutRunner:
             fitted to its own goal and duration.
     """
 
-    def __init__(self, skill, station_config: StationConfig | None = None,
+    def __init__(self, skill, station_config: Scenario | None = None,
                  config: RolloutConfig | None = None, meshcat=None, station=None, dmp: Dmp | None = None):
         self.skill = skill
         self.dmp = skill.initial_dmp if dmp is None else dmp

@@ -68,7 +68,7 @@ class RunnerSpec:
     """Plain data a worker builds its :class:`RolloutRunner` from.
 
     skill_dir: a saved :class:`~drake_skill.skill.Skill`; station_yaml: the
-    ``StationConfig`` as YAML (``yaml_dump_typed``); rollout: the
+    ``Scenario`` as YAML (``dump_scenario``; the worker loads it with ``load_scenario``); rollout: the
     ``RolloutConfig`` fields; quiet_ik: drop differential IK's warnings in
     the worker after counting them (the main process reports the counts);
     dmp_index: the demonstration whose DMP (goal and duration) the rollouts
@@ -84,23 +84,20 @@ class RunnerSpec:
     @classmethod
     def create(cls, skill_dir, station_config, rollout_config: RolloutConfig | None = None,
                quiet_ik: bool = True, dmp_index: int | None = None) -> "RunnerSpec":
-        from pydrake.common.yaml import yaml_dump_typed
+        from drake_skill.station.config import dump_scenario
 
         if not (Path(skill_dir) / "skill.json").is_file():
             raise FileNotFoundError(f"{skill_dir}: no skill.json (workers load the skill from a saved "
                                     "skill directory; save it first)")
         rollout_config = (rollout_config or RolloutConfig()).validate()
-        return cls(str(Path(skill_dir).resolve()), yaml_dump_typed(station_config),
+        return cls(str(Path(skill_dir).resolve()), dump_scenario(station_config),
                    dc.asdict(rollout_config), quiet_ik, None if dmp_index is None else int(dmp_index))
 
     def build(self, meshcat=None) -> RolloutRunner:
-        from pydrake.common.yaml import yaml_load_typed
-
         from drake_skill.skill import Skill
-        from drake_skill.station.config import StationConfig
+        from drake_skill.station.config import load_scenario
 
-        station_config = yaml_load_typed(schema=StationConfig, data=self.station_yaml,
-                                         defaults=StationConfig())
+        station_config = load_scenario(data=self.station_yaml)     # the dumped Scenario, checked again
         skill = Skill.load(self.skill_dir)
         dmp = None
         if self.dmp_index is not None:

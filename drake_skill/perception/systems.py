@@ -207,7 +207,7 @@ class ObjectSegmenterConfig:
 
 
 def segmenter_config_for_station(station_config, window=None) -> ObjectSegmenterConfig:
-    """The segmenter's configuration matching a ``StationConfig``: image size,
+    """The segmenter's configuration matching a ``Scenario``: image size,
     camera rate, the object's nominal pose (default X_WO, nominal yaw) and its
     footprint band (``object.footprint_heights``, where the scenario gives one).
 

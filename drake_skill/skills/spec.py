@@ -15,7 +15,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_skill import configs
 from drake_skill.configs import load_typed
-from drake_skill.station.config import (SCENARIO_DIR, StationConfig, SuccessConfig, load_station_config,
+from drake_skill.station.config import (SCENARIO_DIR, Scenario, SuccessConfig, load_scenario,
                                         object_joint_name, validate_success)
 from drake_skill.station.limits import FINGER_MAX
 
@@ -104,17 +104,17 @@ class SkillSpec:
             return SCENARIO_DIR / f"{self.scenario}.yaml"
         return Path(self.scenario)
 
-    def station_config(self) -> StationConfig:
+    def station_config(self) -> Scenario:
         """The skill's scenario with the skill's success rule (a fresh object each call)."""
-        config = load_station_config(self.scenario_path())
+        config = load_scenario(self.scenario_path())
         config.success = dc.replace(self.success)
         return config
 
-    def station_defaults(self, overrides=None) -> StationConfig:
+    def station_defaults(self, overrides=None) -> Scenario:
         """The scenario a command runs: the skill's, or ``overrides`` (a path) loaded over it."""
         if overrides is None:
             return self.station_config()
-        config = load_station_config(overrides, defaults=self.station_config())
+        config = load_scenario(overrides, defaults=self.station_config())
         return config
 
 
@@ -163,7 +163,7 @@ def _check(spec: SkillSpec, where: str) -> SkillSpec:
     return spec
 
 
-def check_with_scenario(spec: SkillSpec, config: StationConfig, where: str = "") -> None:
+def check_with_scenario(spec: SkillSpec, config: Scenario, where: str = "") -> None:
     """Checks what needs the scenario too: the success rule's joint is the object's,
     and every keyframe is within the arm's reach on every object pose the scenario draws."""
     where = where or f"skill {spec.name!r}"
@@ -259,7 +259,7 @@ def load_skill(skill) -> SkillSpec:
     return spec
 
 
-def scenario_for_skill(skill) -> StationConfig:
+def scenario_for_skill(skill) -> Scenario:
     """The scenario of a skill (a shipped skill's name, a skill file's path or a
     :class:`SkillSpec`) with the skill's success rule."""
     return load_skill(skill).station_config()

@@ -17,7 +17,7 @@ says (``drivers``). The rest of the system sees only the ports:
 Shared by both:
 
 - ``interface``: the contract (ports and their types);
-- ``config``: the scenario (``StationConfig``), loaded from ``scenarios/`` or a
+- ``config``: the scenario (``Scenario``), loaded from ``scenarios/`` or a
   user's own file; ``drivers``: its ``driver`` field's types (the robot's LCM
   channels, URL, timeouts and workspace among them); ``make``: the factory;
 - ``recording``: ``StationRecorder``, the one loop that advances and samples a

@@ -9,12 +9,13 @@ camera (Drake's ``CameraConfig``), the controller, the collision reflex and
 the success rule; code never hard-codes them. The scenes of the shipped
 skills are YAML files in ``drake_skill/station/scenarios/``, and a skill file
 names its scene (:func:`drake_skill.skills.scenario_for_skill` gives a skill's scene with the
-skill's success rule); a user's own file loads with :func:`load_station_config`. Units are SI (m, rad, s, kg, N).
-``load_station_config`` turns every problem into a ``ValueError`` that names
+skill's success rule); a user's own file loads with :func:`load_scenario`. Units are SI (m, rad, s, kg, N).
+``load_scenario`` turns every problem into a ``ValueError`` that names
 the offending field.
 """
 
 
+import copy
 import dataclasses as dc
 import functools
 import math
@@ -269,7 +270,7 @@ class SuccessConfig:
 
 
 @dc.dataclass
-class StationConfig:
+class Scenario:
     """Everything ``build_station`` needs.
 
     plant: Drake's MultibodyPlantConfig (time step, contact model, SAP...).
@@ -316,7 +317,7 @@ class StationConfig:
 
 
 # ----------------------------------------------------------------------------- validation
-_bad = functools.partial(configs.bad, "station config")
+_bad = functools.partial(configs.bad, "scenario")
 
 
 def _number(field, value, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False, what="a number"):
@@ -340,10 +341,10 @@ def _vector(field, values, n, lo=-math.inf, hi=math.inf, lo_open=False, what="nu
         _number(f"{field}[{i}]", v, lo, hi, lo_open=lo_open, what=what)
 
 
-def validate_station_config(config: StationConfig) -> StationConfig:
+def validate_scenario(config: Scenario) -> Scenario:
     """Raises ValueError naming the field of ``config`` that cannot work; returns it."""
-    if not isinstance(config, StationConfig):
-        raise ValueError(f"config must be a StationConfig, got {type(config).__name__}")
+    if not isinstance(config, Scenario):
+        raise ValueError(f"config must be a Scenario, got {type(config).__name__}")
     plant = config.plant
     _number("plant.time_step", plant.time_step, 1e-4, 0.01, what="a plant step [s]")
     if plant.discrete_contact_approximation != "sap":
@@ -468,29 +469,44 @@ def _validate_camera(cam: CameraConfig, field: str) -> None:
         _bad(f"{field}.X_PB.base_frame", cam.X_PB.base_frame, "the world (the camera is fixed)")
 
 
-def load_station_config(path: str | Path | None = None, *, data: str | None = None,
-                        defaults: StationConfig | None = None) -> StationConfig:
-    """Loads a StationConfig from a YAML file or string, then validates it.
+def load_scenario(path: str | Path | None = None, *, data: str | None = None, overrides=(),
+                  defaults: Scenario | None = None) -> Scenario:
+    """The scenario of a YAML file (``path``) or string (``data``), laid over ``defaults`` (else
+    the built-in :class:`Scenario`), then each YAML text of ``overrides`` in turn, validated once:
+    the layering of the ``manipulation`` repository's ``LoadScenario(filename, scenario_text)``.
+    A command's flags reach the scenario as overrides (``--scenario-text``, ``--no-camera`` as
+    ``enable_camera: false``). With neither ``path`` nor ``data``, ``defaults`` alone is layered.
 
-    Keys left out keep their defaults (``defaults``, else the built-in
-    :class:`StationConfig`); an unknown key (a typo) is an error that names it.
+    Keys left out keep their defaults; an unknown key (a typo), a value of the wrong type or one
+    that cannot work is a one-line ValueError naming the file (or the override) and the field.
     """
-    config = load_typed(StationConfig, what="station config", path=path, data=data, defaults=defaults)
-    path = None if path is None else Path(path)
-    where = f"{path}" if path is not None else "YAML"
-    base = path.parent if path is not None else Path.cwd()
-    for d in config.directives:                      # a user's model file, relative to the scenario
+    if path is None and data is None:
+        config = copy.deepcopy(defaults) if defaults is not None else Scenario()
+        where = "defaults"
+    else:
+        config = load_typed(Scenario, what="scenario", path=path, data=data, defaults=defaults)
+        where = f"{path}" if path is not None else "YAML"
+    if path is not None:
+        _resolve_relative_files(config, Path(path).parent)
+    for text in overrides:
+        where += f" + override {text!r}"
+        config = load_typed(Scenario, what="scenario", data=text, defaults=config, where=where)
+    try:
+        return validate_scenario(config)
+    except ValueError as e:
+        raise ValueError(f"scenario ({where}): {e}") from e
+
+
+def _resolve_relative_files(config: Scenario, base: Path) -> None:
+    """A user's model or directives file named relative to the scenario file, made absolute."""
+    for d in config.directives:
         if d.add_model is not None and "://" not in d.add_model.file:
             d.add_model.file = "file://" + str((base / d.add_model.file).resolve())
         if d.add_directives is not None and "://" not in d.add_directives.file:
             d.add_directives.file = "file://" + str((base / d.add_directives.file).resolve())
-    try:
-        return validate_station_config(config)
-    except ValueError as e:
-        raise ValueError(f"station config ({where}): {e}") from e
 
 
-def dump_station_config(config: StationConfig) -> str:
+def dump_scenario(config: Scenario) -> str:
     """The YAML text of ``config`` (every field written)."""
     return yaml_dump_typed(config)
 
@@ -506,7 +522,7 @@ def _inlined(text: str) -> str:
     from drake_skill.station.models import model_url, url_path
     from pydrake.multibody.parsing import LoadModelDirectives
 
-    config = yaml_load_typed(schema=StationConfig, data=text, defaults=StationConfig())
+    config = yaml_load_typed(schema=Scenario, data=text, defaults=Scenario())
     flat = []
     for d in config.directives:
         if d.add_directives is not None and d.add_directives.file.startswith(model_url("")) \
@@ -518,12 +534,12 @@ def _inlined(text: str) -> str:
     return yaml_dump_typed(config)
 
 
-def object_joint_name(config: StationConfig) -> str:
+def object_joint_name(config: Scenario) -> str:
     """The name of the scenario's object joint (the one ``object_state`` reports)."""
     return config.object.joint
 
 
-def _validate_directives(config: StationConfig) -> None:
+def _validate_directives(config: Scenario) -> None:
     """Every ``add_model`` file exists; processed, the directives add the robot's model instances and
     the object's (an included ``add_directives`` file counts)."""
     from drake_skill.station.placement import object_parts
@@ -574,7 +590,7 @@ def _directives_key(directives) -> tuple:
 def _directives_plant(key: tuple):
     """Every directive processed on a scratch plant (~0.1 s; the station processes the same list),
     so a frame no model has or a model Drake cannot parse is found where the scenario file
-    loads, and ``load_station_config`` names the file. Read-only for its callers."""
+    loads, and ``load_scenario`` names the file. Read-only for its callers."""
     from pydrake.common.yaml import yaml_load_typed as load
     from pydrake.multibody.parsing import Parser
     from pydrake.multibody.plant import MultibodyPlant
@@ -588,7 +604,7 @@ def _directives_plant(key: tuple):
     return plant
 
 
-def validate_success(rule: SuccessConfig, field: str = "success", what: str = "station config") -> SuccessConfig:
+def validate_success(rule: SuccessConfig, field: str = "success", what: str = "scenario") -> SuccessConfig:
     """Raises ValueError naming the field of a success rule that cannot work (``what``: the
     configuration it is in); returns it."""
     _bad = functools.partial(configs.bad, what)

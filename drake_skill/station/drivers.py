@@ -3,7 +3,7 @@
 (No ``from __future__ import annotations`` here: yaml_load_typed reads the
 field types at run time.)
 
-The scenario's ``driver`` (``drake_skill.station.config.StationConfig.driver``)
+The scenario's ``driver`` (``drake_skill.station.config.Scenario.driver``)
 says what sits between the station's command input and the arm; the station
 factory (:func:`drake_skill.station.make.make_station`) dispatches on its
 type, as the ``manipulation`` repository's ``MakeHardwareStation`` dispatches
@@ -118,13 +118,13 @@ def require_panda_driver(config, who: str, where: str = "") -> PandaLcmDriver:
     """The ``!PandaLcmDriver`` of the scenario ``config``; else the one-line ValueError that
     names the field and the fix. who: what needs it ("the robot"); where: the scenario's file."""
     if not isinstance(config.driver, PandaLcmDriver):
-        raise ValueError(f"station config{f' ({where})' if where else ''}: field 'driver' = "
+        raise ValueError(f"scenario{f' ({where})' if where else ''}: field 'driver' = "
                          f"{driver_tag(config.driver)}: {who} speaks the Panda driver's LCM protocol; give the "
                          "scenario driver: !PandaLcmDriver {...} (tagged; its keys: lcm_url, channels, timeouts)")
     return config.driver
 
 
-def validate_driver(driver, diff_ik_period: float, what: str = "station config") -> None:
+def validate_driver(driver, diff_ik_period: float, what: str = "scenario") -> None:
     """Raises the one-line ValueError of a ``driver`` field that cannot work.
 
     diff_ik_period: the scenario's ``controller.diff_ik_period`` [s]; a robot's

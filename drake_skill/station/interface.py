@@ -37,7 +37,7 @@ CAMERA_OUTPUTS = {"point_cloud": ("kAbstractValued", "PointCloud"),
 class StationInterface(Protocol):
     """A station: a Diagram with the ports above, its scenario, and these methods.
 
-    config: the scenario (``StationConfig``); realtime: its simulator must run
+    config: the scenario (``Scenario``); realtime: its simulator must run
     in real time (the robot's); object_camera: the cropped object camera
     (``drake_skill.station.camera.ObjectCamera``) or None without one.
     """

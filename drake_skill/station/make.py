@@ -1,7 +1,7 @@
 """``make_station``: the one factory of a station, simulated or on the robot.
 
 The pattern of the ``manipulation`` repository's ``MakeHardwareStation(scenario,
-meshcat, hardware=False)``: one scenario (``StationConfig``) describes the
+meshcat, hardware=False)``: one scenario (``Scenario``) describes the
 models, the object, the cameras and the arm's ``driver``; ``hardware``
 chooses between the simulated station and the interface to the robot, and
 the driver's type chooses what drives the arm (``drake_skill.station.drivers``).
@@ -10,12 +10,12 @@ Both stations export the ports of ``drake_skill.station.interface``.
 
 from __future__ import annotations
 
-from drake_skill.station.config import StationConfig, validate_station_config
+from drake_skill.station.config import Scenario, validate_scenario
 
 __all__ = ["make_station"]
 
 
-def make_station(scenario: StationConfig | None = None, hardware: bool = False, meshcat=None, *,
+def make_station(scenario: Scenario | None = None, hardware: bool = False, meshcat=None, *,
                  lcm=None, commanding: bool = True):
     """The station of ``scenario`` (default: the Open scene).
 
@@ -26,7 +26,7 @@ def make_station(scenario: StationConfig | None = None, hardware: bool = False, 
     driver's URL) and ``commanding`` (False: only listen, e.g. while a person guides
     the arm) apply to the robot only. ``meshcat`` draws the station in Meshcat.
     """
-    scenario = validate_station_config(scenario if scenario is not None else StationConfig())
+    scenario = validate_scenario(scenario if scenario is not None else Scenario())
     if not hardware:
         from drake_skill.station.sim.builder import Station
 

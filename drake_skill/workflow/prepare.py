@@ -24,7 +24,7 @@ class PrepareConfig:
     demonstrations or ``skill_dir`` name). skill_dir: a fitted skill to use
     as it is. demos: a folder of demo_*.npz files to fit from (neither
     ``skill_dir`` nor ``demos``: scripted demonstrations are recorded).
-    station_for: ``station_for(spec) -> StationConfig``, the scenario to
+    station_for: ``station_for(spec) -> Scenario``, the scenario to
     record and refine on for the skill once it is known (it may come from the
     demonstrations); None: the skill's own. fit: "tolerance" or "thesis"
     (docs/method.md 2.2). quiet: no progress bars.

@@ -78,7 +78,7 @@ from pydrake.systems.sensors import PixelType
 from drake_skill.station import recording as _recording
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.controller import EndEffectorController, make_control_plant
-from drake_skill.station.config import StationConfig, validate_station_config
+from drake_skill.station.config import Scenario, validate_scenario
 from drake_skill.station.drivers import PandaLcmDriver, require_panda_driver
 from drake_skill.station.reflex import add_reflex_monitor
 
@@ -450,7 +450,7 @@ class HardwareStation(Diagram):
     :meth:`reset`, :meth:`object_pose`, :meth:`set_reset_hook`.
 
     Args:
-        config: the scenario (``StationConfig``); its ``driver`` must be a
+        config: the scenario (``Scenario``); its ``driver`` must be a
             :class:`~drake_skill.station.drivers.PandaLcmDriver` (channels, URL,
             timeouts, workspace).
         lcm: a DrakeLcm to use (default: a new one on ``config.driver.lcm_url``). The
@@ -467,10 +467,10 @@ class HardwareStation(Diagram):
     #: simulated robot publishes it on ``ground_truth_channel``.
     has_ground_truth = False
 
-    def __init__(self, config: StationConfig, lcm: DrakeLcm | None = None, meshcat=None,
+    def __init__(self, config: Scenario, lcm: DrakeLcm | None = None, meshcat=None,
                  commanding: bool = True):
         super().__init__()
-        self.config = validate_station_config(config)
+        self.config = validate_scenario(config)
         self.driver = driver = require_panda_driver(config, "the hardware station")
         self.lcm = lcm if lcm is not None else DrakeLcm(driver.lcm_url)
         self._reset_hook = None
@@ -741,10 +741,10 @@ class _Selector(LeafSystem):
         output.SetFromVector(self._u.Eval(context)[:self._m])
 
 
-def build_hardware_station(config: StationConfig | None = None, lcm: DrakeLcm | None = None,
+def build_hardware_station(config: Scenario | None = None, lcm: DrakeLcm | None = None,
                            meshcat=None, commanding: bool = True) -> HardwareStation:
     """Builds the hardware station of the scenario ``config`` (its driver a ``!PandaLcmDriver``;
     default: the Open scene on LCM's default URL); ``drake_skill.station.make.make_station``
     with ``hardware=True`` does the same."""
-    config = config if config is not None else StationConfig(driver=PandaLcmDriver())
+    config = config if config is not None else Scenario(driver=PandaLcmDriver())
     return HardwareStation(config, lcm=lcm, meshcat=meshcat, commanding=commanding)

@@ -71,7 +71,7 @@ from pydrake.common.value import AbstractValue, Value
 
 from drake_skill.station.controller import X_HAND_TCP, EndEffectorController, add_arm_and_hand, make_finger_limiter
 from drake_skill.station.models import add_package_paths, add_panda_illustration, process_directives
-from drake_skill.station.config import StationConfig, validate_station_config
+from drake_skill.station.config import Scenario, validate_scenario
 from drake_skill.station.drivers import JointSetpointDriver
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor, robot_scene_pairs
@@ -130,7 +130,7 @@ class ScenePlant:
     robot_bodies: set
 
 
-def add_scene_plant(builder: DiagramBuilder, config: StationConfig) -> ScenePlant:
+def add_scene_plant(builder: DiagramBuilder, config: Scenario) -> ScenePlant:
     """Adds the scenario's MultibodyPlant (``config.plant``) and SceneGraph to ``builder``:
     Panda + hand + table + object, every surface's contact parameters, the
     joints' PD gains (SAP's implicit joint impedance), the object joint's
@@ -198,7 +198,7 @@ def _set_contact_properties(plant, scene_graph, contact, obj) -> None:
                     surface = candidate
                     break
             if surface is None:
-                raise ValueError(f"station config field 'directives': the collision geometry {name} of body "
+                raise ValueError(f"scenario field 'directives': the collision geometry {name} of body "
                                  f"{body.name()} is neither the robot's, the table's nor the object's; "
                                  "add only the robot, the table and the object (object.model)")
             s = getattr(contact, surface)
@@ -222,9 +222,9 @@ class Station(Diagram):
     #: A simulation runs as fast as it can (the hardware station's is True).
     realtime = False
 
-    def __init__(self, config: StationConfig, meshcat=None):
+    def __init__(self, config: Scenario, meshcat=None):
         super().__init__()
-        self.config = validate_station_config(config)
+        self.config = validate_scenario(config)
         self.object_camera = None      # the cropped object camera, with the camera on
         builder = DiagramBuilder()
         scene = add_scene_plant(builder, config)
@@ -448,6 +448,6 @@ class Station(Diagram):
         return X_WO
 
 
-def build_station(config: StationConfig | None = None, meshcat=None) -> Station:
+def build_station(config: Scenario | None = None, meshcat=None) -> Station:
     """Builds the simulated station described by ``config`` (defaults: the Open scenario)."""
-    return Station(config if config is not None else StationConfig(), meshcat=meshcat)
+    return Station(config if config is not None else Scenario(), meshcat=meshcat)

@@ -45,7 +45,7 @@ from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubsc
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, StateInterpolatorWithDiscreteDerivative
 from pydrake.systems.sensors import ImageToLcmImageArrayT
 
-from drake_skill.station.config import StationConfig, validate_station_config
+from drake_skill.station.config import Scenario, validate_scenario
 from drake_skill.station.drivers import JointSetpointDriver, PandaLcmDriver, require_panda_driver
 from drake_skill.station.make import make_station
 from drake_skill.station.success import judge_success
@@ -141,7 +141,7 @@ class SimRobot:
     """The simulated station behind the driver's LCM protocol, on its own simulator.
 
     Args:
-        config: the scenario (``StationConfig``); its ``driver``, a
+        config: the scenario (``Scenario``); its ``driver``, a
             ``!PandaLcmDriver``, gives the channels and the URL. The robot's own
             station is the scenario with a ``!JointSetpointDriver``.
         lcm: a DrakeLcm to use (default: a new one on ``config.driver.lcm_url``).
@@ -165,10 +165,10 @@ class SimRobot:
             ``drake_skill.demos.demonstrator.humanlike_plan``).
     """
 
-    def __init__(self, config: StationConfig | None = None, lcm: DrakeLcm | None = None,
+    def __init__(self, config: Scenario | None = None, lcm: DrakeLcm | None = None,
                  pump: bool = True, meshcat=None, expire_sec: float = 0.1, guide=None):
-        config = config if config is not None else StationConfig(driver=PandaLcmDriver())
-        self.config = validate_station_config(config)
+        config = config if config is not None else Scenario(driver=PandaLcmDriver())
+        self.config = validate_scenario(config)
         self.driver = driver = require_panda_driver(config, "the simulated robot")
         self.lcm = lcm if lcm is not None else DrakeLcm(driver.lcm_url)
         # The reflex is the driver side's: the hardware station's monitor decides it from the

@@ -21,7 +21,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_skill.station.config import StationConfig
+from drake_skill.station.config import Scenario
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
 from drake_skill.station.recording import RunLog, StationRecorder
 from drake_skill.station.make import make_station
@@ -36,7 +36,7 @@ class StationSimulation:
     for recordings with perception (needs ``config.enable_camera``).
     """
 
-    def __init__(self, config: StationConfig | None = None, meshcat=None, perceive: bool = False):
+    def __init__(self, config: Scenario | None = None, meshcat=None, perceive: bool = False):
         builder = DiagramBuilder()
         self.station: Station = builder.AddNamedSystem("station", make_station(config, meshcat=meshcat))
         self.config = self.station.config
