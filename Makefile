@@ -50,7 +50,7 @@ MUTATION_ENV = OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 MUTATE ?= drake_skill.action.quaternion drake_skill.reward.mrp drake_skill.fileio \
 	drake_skill.learning.policy_search drake_skill.reward.pomrp drake_skill.perception.features \
 	drake_skill.action.dmp drake_skill.perception.segmentation drake_skill.demos.format \
-	drake_skill.reward.goal_model drake_skill.station.placement drake_skill.station.records \
+	drake_skill.reward.goal_model drake_skill.station.placement drake_skill.station.loggers \
 	drake_skill.skills.spec drake_skill.learning.runlog drake_skill.demos.robomimic \
 	drake_skill.experiments.report drake_skill.station.reflex drake_skill.station.controller
 MUTMUT_CHILDREN ?= 2

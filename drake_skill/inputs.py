@@ -60,7 +60,7 @@ def load_yaml(schema, path: Path, option: str, defaults=None):
 
     Bad YAML or an unknown key is a ValueError naming the file and the key.
     """
-    from drake_skill.configs import load_typed
+    from drake_skill.typed_yaml import load_typed
 
     path = input_file(path, option, f"a YAML file of {schema.__name__} fields")
     return load_typed(schema, what=option, path=path, defaults=defaults)
@@ -85,7 +85,7 @@ def scenario(base, path: Path | None = None, texts=(), option: str = "--scenario
     written as YAML). Every problem is one line naming the option, the file or text, and the field."""
     import yaml
 
-    from drake_skill.station.config import Scenario, load_scenario
+    from drake_skill.station.scenario import Scenario, load_scenario
     from drake_skill.skills import scenario_for_skill
 
     defaults = base if isinstance(base, Scenario) else scenario_for_skill(base)

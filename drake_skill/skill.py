@@ -42,7 +42,7 @@ from pydrake.common.yaml import yaml_dump_typed
 from drake_skill.action.dmp import Dmp, DmpConfig, fit_demonstrations
 from drake_skill.action.fitting import FitTolerance, choose_n_basis, contact_mask, fit_errors
 from drake_skill import fileio
-from drake_skill.configs import load_typed
+from drake_skill.typed_yaml import load_typed
 from drake_skill.perception.features import GoalFeatures, GoalFeaturesConfig
 from drake_skill.reward.pomrp import Pomrp, PomrpConfig, fit_pomrp
 from drake_skill.skills import SkillSpec, load_skill

@@ -105,7 +105,7 @@ def test_user_errors_are_checked_before_work(tmp_path, capsys):
     bad = tmp_path / "bad.yaml"
     bad.write_text("skill: [\n")
     assert main(["fit", "--demos", str(demos), "--out", str(tmp_path / "o"), "--config", str(bad)]) == 2
-    assert f"--config ({bad}):" in _one_error_line(capsys)     # one format: drake_skill.configs
+    assert f"--config ({bad}):" in _one_error_line(capsys)     # one format: drake_skill.typed_yaml
     typo = tmp_path / "typo.yaml"
     typo.write_text("dmp: {n_bases: 3}\n")
     assert main(["fit", "--demos", str(demos), "--out", str(tmp_path / "o"), "--config", str(typo)]) == 2

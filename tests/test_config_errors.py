@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 
 from drake_skill.cli.main import main
-from drake_skill.configs import load_typed
+from drake_skill.typed_yaml import load_typed
 from drake_skill.learning.config import LearnConfig
-from drake_skill.station.config import Scenario
+from drake_skill.station.scenario import Scenario
 
 
 @pytest.mark.parametrize("text, expected", [

@@ -12,7 +12,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_skill.demos.demonstrator import DemonstratorConfig, ScriptedDemonstrator, demonstration_from
 from drake_skill.demos.force_margin import FORCE_MARGIN, check_margin, margin_message, margin_warnings, peaks
-from drake_skill.station.config import ReflexConfig
+from drake_skill.station.scenario import ReflexConfig
 from drake_skill.skills import scenario_for_skill
 
 pytestmark = pytest.mark.usefixtures("quiet_differential_ik")

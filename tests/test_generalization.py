@@ -103,7 +103,7 @@ def test_a_demonstration_ending_at_exactly_zero_is_judged_not_skipped():
     from types import SimpleNamespace
 
     from drake_skill.skill import check_demonstrations_meet_rule
-    from drake_skill.station.config import SuccessConfig
+    from drake_skill.station.scenario import SuccessConfig
 
     spec = SimpleNamespace(name="lift", success=SuccessConfig(joint="j", above=0.5))
     demos = [SimpleNamespace(final_object_state=0.0, path="a.npz"), SimpleNamespace(final_object_state=0.2)]

@@ -38,7 +38,7 @@ from drake_skill.station.sim.builder import build_station
 from drake_skill.skills import scenario_for_skill
 from drake_skill.station.hardware.station import (STATUS_CHECK_PERIOD, ReflexError, StaleStatusError, StatusMonitor,
                                           build_hardware_station)
-from drake_skill.station.config import load_scenario
+from drake_skill.station.scenario import load_scenario
 from drake_skill.station.drivers import PandaLcmDriver
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource
 from drake_skill.demos.scripted import scripted_plan

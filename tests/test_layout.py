@@ -13,7 +13,7 @@ MATH_BOXES = ("action", "perception", "reward", "learning")
 #: in ``learning``, the rollout runner and its workers, which simulate the diagram.
 DRAKE_SIDE = ("systems", "rollout", "workers")
 #: Drake-free modules outside the boxes.
-MATH_MODULES = ("drake_skill.common", "drake_skill.configs", "drake_skill.fileio", "drake_skill.resources")
+MATH_MODULES = ("drake_skill.common", "drake_skill.typed_yaml", "drake_skill.fileio", "drake_skill.resources")
 
 # Makes ``import pydrake`` (and any submodule) fail, then imports the module.
 _PROBE = """
@@ -175,12 +175,12 @@ def test_no_import_cycles_counting_function_local_imports():
     assert cycles == []
     # The probe follows function-local imports: scenarios of skills come from skills, not the station.
     assert "drake_skill.skills" in graph["drake_skill.workflow.prepare"]
-    assert "drake_skill.skills" not in graph["drake_skill.station.config"]
+    assert "drake_skill.skills" not in graph["drake_skill.station.scenario"]
 
 
 #: The package's layers, lowest first: a module imports only from its own layer or below.
 LAYERS = (
-    ("drake_skill", "common", "configs", "fileio", "resources"),   # Drake-free foundations
+    ("drake_skill", "common", "typed_yaml", "fileio", "resources"),   # Drake-free foundations
     ("action",),                  # the DMP (math | DmpSystem)
     ("perception",),              # segmenter, PCAE, features (math | systems)
     ("reward", "station"),        # goal model and POMRP; the station (sim and hardware)

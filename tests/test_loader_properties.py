@@ -95,7 +95,7 @@ def test_a_damaged_scenario(tmp_path, data):
 @given(data=damaged(LEARN, text=True))
 def test_a_damaged_learn_config(tmp_path, data):
     from drake_skill.cli.learn_config import LearnFile
-    from drake_skill.configs import load_typed
+    from drake_skill.typed_yaml import load_typed
 
     _check(lambda p: load_typed(LearnFile, what="--config", path=p).learn.validate(), tmp_path / "learn.yaml", data)
 

@@ -64,7 +64,7 @@ def test_a_seed_is_always_the_same_placement():
 # ----------------------------------------------------------------------------- the module's functions directly
 def _object_plant(config):
     """The scenario's directives parsed into a plant (as station.config checks them), and the object's instance."""
-    from drake_skill.station.config import _directives_key, _directives_plant
+    from drake_skill.station.scenario import _directives_key, _directives_plant
 
     plant = _directives_plant(_directives_key(config.directives))
     return plant, plant.GetModelInstanceByName(config.object.model)

@@ -19,7 +19,7 @@ from drake_skill.perception.systems import (
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
 from drake_skill.perception.segmentation import fit_table_plane
 from drake_skill.station.sim.builder import build_station
-from drake_skill.station.config import Scenario
+from drake_skill.station.scenario import Scenario
 from drake_skill.skills import scenario_for_skill
 
 

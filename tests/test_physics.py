@@ -355,7 +355,7 @@ def test_rate_limiter_scales_and_clips_the_reference_and_outputs_its_state():
 def test_finger_limiter_halves_and_clips_the_opening():
     from pydrake.systems.analysis import Simulator
 
-    from drake_skill.station.config import ControllerConfig
+    from drake_skill.station.scenario import ControllerConfig
     from drake_skill.station.controller import FINGER_ACCEL_MAX, LimiterConstants, make_finger_limiter
 
     config = ControllerConfig(limiter_period=1e-3, limiter_bandwidth=30.0, diff_ik_period=0.02)
@@ -384,7 +384,7 @@ def test_finger_limiter_halves_and_clips_the_opening():
 
 
 def test_end_effector_controller_ik_parameters_and_reset():
-    from drake_skill.station.config import ControllerConfig
+    from drake_skill.station.scenario import ControllerConfig
     from drake_skill.station.controller import EndEffectorController
 
     config = ControllerConfig(diff_ik_period=0.02, velocity_scale=0.5, ee_speed_max=0.3, limiter_period=1e-3,

@@ -9,7 +9,7 @@ from pydrake.systems.analysis import Simulator, SimulatorStatus
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource
 
-from drake_skill.station.config import ReflexConfig
+from drake_skill.station.scenario import ReflexConfig
 from drake_skill.station.reflex import ReflexMonitor, reflex_filter_step
 
 

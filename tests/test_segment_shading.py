@@ -14,7 +14,7 @@ import pytest
 
 from drake_skill.cli.main import main
 from drake_skill.perception.segmentation import SegmentationConfig, segment_object, select_regions
-from drake_skill.station.config import ROBOT_DIRECTIVES
+from drake_skill.station.scenario import ROBOT_DIRECTIVES
 
 LIT = (30, 60, 175)         # the shipped objects' blue as rendered: HSV value 0.686
 SHADED = (7, 14, 38)        # the same hue turned from the light: value 0.149, under the former floor 0.15

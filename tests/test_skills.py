@@ -11,7 +11,7 @@ import pytest
 
 from drake_skill.skills import keyframes, load_skill, shipped_skill_names
 from drake_skill.skills.spec import REACH_M, SHOULDER
-from drake_skill.station.config import SuccessConfig
+from drake_skill.station.scenario import SuccessConfig
 
 SKILL = """\
 name: {name}
@@ -169,7 +169,7 @@ def _check_message(**changes):
 ])
 def test_the_edges_of_every_skill_field_are_valid(changes):
     if "scenario" in changes:
-        from drake_skill.station.config import SCENARIO_DIR
+        from drake_skill.station.scenario import SCENARIO_DIR
 
         changes = dict(scenario=str(SCENARIO_DIR / "drawer.yaml"))
     assert _check_message(**changes) is None
@@ -177,7 +177,7 @@ def test_the_edges_of_every_skill_field_are_valid(changes):
 
 def test_each_skill_field_error_in_full():
     from drake_skill.skills.spec import Keyframe
-    from drake_skill.station.config import SCENARIO_DIR, SuccessConfig
+    from drake_skill.station.scenario import SCENARIO_DIR, SuccessConfig
 
     expected = {
         "name": "a name of letters, digits, '_' and '-'",
@@ -315,7 +315,7 @@ def test_screw_motion_by_hand():
 
 def test_scenario_paths_and_load_errors(tmp_path):
     from drake_skill.skills.spec import SKILL_DIR, SkillSpec, scenario_for_skill
-    from drake_skill.station.config import SCENARIO_DIR
+    from drake_skill.station.scenario import SCENARIO_DIR
 
     assert SkillSpec(scenario="drawer").scenario_path() == SCENARIO_DIR / "drawer.yaml"
     for text in ("my.yaml", "my.yml", "scenes/drawer"):

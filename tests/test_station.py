@@ -10,7 +10,7 @@ from drake_skill.station.models import add_package_paths, model_url
 from drake_skill.station.pose_source import hold_plan
 from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.sim.simulation import StationSimulation
-from drake_skill.station.config import Scenario, load_scenario
+from drake_skill.station.scenario import Scenario, load_scenario
 from drake_skill.skills import scenario_for_skill
 from drake_skill.station.success import judge_success
 
@@ -205,7 +205,7 @@ def test_config_yaml_round_trip(tmp_path):
 
 def test_shipped_scenarios_are_yaml_files_in_the_package():
     from drake_skill.skills import load_skill
-    from drake_skill.station.config import dump_scenario
+    from drake_skill.station.scenario import dump_scenario
     for skill, model, x, joint in (("open", "box", 0.60, 0.0), ("close", "box", 0.46, 1.9),
                                    ("draw", "drawer", 0.68, 0.0)):
         path = load_skill(skill).scenario_path()

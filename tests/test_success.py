@@ -10,7 +10,7 @@ import dataclasses as dc
 import numpy as np
 import pytest
 
-from drake_skill.station.config import SuccessConfig
+from drake_skill.station.scenario import SuccessConfig
 from drake_skill.skills import load_skill
 from drake_skill.station.success import TOUCH_FORCE_N, hand_left, judge_run, judge_success
 

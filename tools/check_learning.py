@@ -48,7 +48,7 @@ def initial_skill(skill: str, out: Path, quiet: bool) -> Path:
 def one_run(skill_dir: Path, out: Path, seed: int, args, log) -> dict:
     from drake_skill.learning.loop import LearnConfig, learn
     from drake_skill.skill import Skill
-    from drake_skill.station.config import load_scenario
+    from drake_skill.station.scenario import load_scenario
     from drake_skill.skills import scenario_for_skill
 
     if (out / "summary.json").is_file():

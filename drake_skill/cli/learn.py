@@ -115,8 +115,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _station_config(args, skill):
     """The skill's scenario, under the --config file's ``station`` and then --scenario."""
-    from drake_skill.configs import load_typed
-    from drake_skill.station.config import validate_scenario
+    from drake_skill.typed_yaml import load_typed
+    from drake_skill.station.scenario import validate_scenario
     from drake_skill.skills import scenario_for_skill
 
     station = scenario_for_skill(skill)
@@ -145,7 +145,7 @@ def _apply_config_file(args) -> None:
     learn = LearnConfig()
     if args.config is not None:
         from drake_skill.cli.learn_config import LearnFile
-        from drake_skill.configs import load_typed
+        from drake_skill.typed_yaml import load_typed
 
         errors.input_file(args.config, "--config", "a YAML file of drake-skill learn settings")
         loaded = load_typed(LearnFile, what="--config", path=args.config)

@@ -17,7 +17,7 @@ the effective settings (the station in full) and runs nothing.
 import dataclasses as dc
 
 from drake_skill.learning.loop import LearnConfig
-from drake_skill.station.config import Scenario
+from drake_skill.station.scenario import Scenario
 
 __all__ = ["LearnFile"]
 

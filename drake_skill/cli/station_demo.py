@@ -27,14 +27,15 @@ from drake_skill.fileio import atomic_write_json, write_figure_png
 NAME = "station-demo"
 HELP = "scripted Open/Close/Draw in the simulated station"
 
-def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, scenario: Path | None = None) -> dict:
+def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, scenario: Path | None = None,
+             scenario_text=()) -> dict:
     from drake_skill.fileio import new_figure
 
     from drake_skill.demos.scripted import scripted_plan
     from drake_skill.station.sim.simulation import StationSimulation
     from drake_skill.station.success import rule_text
     skills = [errors.skill(skill, "--skills") for skill in skills]
-    configs = {spec.name: errors.station_config(spec, scenario) for spec in skills}  # all checked first
+    configs = {spec.name: errors.station_config(spec, scenario, scenario_text) for spec in skills}  # all checked first
     specs, skills = {spec.name: spec for spec in skills}, [spec.name for spec in skills]
     summary, logs = {}, {}
     for skill in skills:
@@ -102,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     if args.skills is None:
         from drake_skill.skills import shipped_skills
         args.skills = [spec.name for spec in shipped_skills() if spec.keyframes]
-    if args.scenario is not None:
+    if args.scenario is not None or args.scenario_text:
         for skill in args.skills:
             errors.station_config(skill, args.scenario, args.scenario_text)
     meshcat = None
@@ -111,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         meshcat = StartMeshcat()
         print(f"Meshcat: {meshcat.web_url()}")
     summary = run_demo(args.skills, args.seed, args.out, meshcat, realtime=1.0 if meshcat else 0.0,
-                       scenario=args.scenario)
+                       scenario=args.scenario, scenario_text=args.scenario_text)
     print(f"{'skill':<7}{'final state':>13}  {'threshold':<20}{'scripted':>10}{'parked':>9}{'wall s':>8}")
     for skill, row in summary.items():
         print(f"{skill:<7}{row['final_object_state']:>13.3f}  {row['threshold']:<20}"

@@ -51,8 +51,8 @@ import numpy as np
 from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.math import RigidTransform, RotationMatrix
 
-from drake_skill import configs
-from drake_skill.configs import load_typed
+from drake_skill import typed_yaml
+from drake_skill.typed_yaml import load_typed
 from drake_skill.demos.format import Demonstration, downsample_action, object_frame_poses, snapshot_frames
 from drake_skill.demos.force_margin import peaks
 from drake_skill.station.pose_source import PosePlan
@@ -60,7 +60,7 @@ from drake_skill.station.recording import ReflexError, StationRecorder, pose_to_
 from drake_skill.station.sim.simulation import StationSimulation
 from drake_skill.station.success import judge_run
 from drake_skill.skills import SkillSpec, keyframes, load_skill
-from drake_skill.station.config import Scenario
+from drake_skill.station.scenario import Scenario
 
 
 @dc.dataclass
@@ -130,7 +130,7 @@ class DemonstratorConfig:
 
     def validate(self) -> "DemonstratorConfig":
         """Raises ValueError naming the field that cannot work; returns self."""
-        bad = functools.partial(configs.bad, "demonstrator config")
+        bad = functools.partial(typed_yaml.bad, "demonstrator config")
 
         if self.count < 0:
             bad("count", self.count, "0 (thesis default) or a positive number of demonstrations")

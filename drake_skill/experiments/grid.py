@@ -361,8 +361,8 @@ def check_settings(out: Path, config: GridConfig, specs: dict) -> None:
 
 def _same_settings(now: dict, stored: dict) -> bool:
     """A skill's station and rollout settings as stored, the station compared by what it builds
-    (:func:`~drake_skill.station.config.same_station`)."""
-    from drake_skill.station.config import same_station
+    (:func:`~drake_skill.station.scenario.same_station`)."""
+    from drake_skill.station.scenario import same_station
 
     return now.get("rollout") == stored.get("rollout") and isinstance(stored.get("station"), str) \
         and same_station(now["station"], stored["station"])

@@ -10,7 +10,7 @@ import math
 import typing
 from typing import Any
 
-from drake_skill import configs
+from drake_skill import typed_yaml
 from drake_skill.learning.policy_search import METHODS
 from drake_skill.learning.exploration import EXPLORATIONS
 from drake_skill.learning.selection import SELECT_RULES
@@ -80,7 +80,7 @@ class LearnConfig:
     exploration: str = "basis"
 
     def validate(self) -> "LearnConfig":
-        bad = functools.partial(configs.bad, "learn config")
+        bad = functools.partial(typed_yaml.bad, "learn config")
 
         if self.method not in METHODS:
             bad("method", self.method, f"one of {', '.join(METHODS)}")

@@ -275,7 +275,7 @@ class LearningRun:
                                     "run without --resume to start")
         saved = load_json(self.out_dir / "config.json", DAMAGED_RUN)
         started_with = saved.pop("versions", None)
-        from drake_skill.station.config import same_station
+        from drake_skill.station.scenario import same_station
 
         if isinstance(saved.get("station"), str) and same_station(saved["station"], self.run_config["station"]):
             saved["station"] = self.run_config["station"]

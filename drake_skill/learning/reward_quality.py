@@ -47,7 +47,7 @@ def rule_direction(rule) -> tuple[float, int]:
     threshold), -1 for ``below`` (state <= threshold).
 
     ``rule``: an object with ``above`` and ``below`` attributes
-    (:class:`~drake_skill.station.config.SuccessConfig`) or a mapping with those keys, exactly
+    (:class:`~drake_skill.station.scenario.SuccessConfig`) or a mapping with those keys, exactly
     one of them set.
     """
     above, below = _field(rule, "above"), _field(rule, "below")

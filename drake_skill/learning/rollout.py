@@ -59,9 +59,9 @@ from drake_skill.action.dmp import Dmp, DmpConfig, default_times, integrate
 from drake_skill.action.systems import DmpSystem
 from drake_skill.station.make import make_station
 from drake_skill.station.sim.builder import Station
-from drake_skill.station.config import Scenario
+from drake_skill.station.scenario import Scenario
 from drake_skill.station.frames import add_camera_frames
-from drake_skill.station.records import StationLoggers
+from drake_skill.station.loggers import StationLoggers
 from drake_skill.station.recording import advance_station, check_joint_state, pose_to_vector, vector_to_pose
 from drake_skill.station.success import judge_run
 

@@ -84,7 +84,7 @@ class RunnerSpec:
     @classmethod
     def create(cls, skill_dir, station_config, rollout_config: RolloutConfig | None = None,
                quiet_ik: bool = True, dmp_index: int | None = None) -> "RunnerSpec":
-        from drake_skill.station.config import dump_scenario
+        from drake_skill.station.scenario import dump_scenario
 
         if not (Path(skill_dir) / "skill.json").is_file():
             raise FileNotFoundError(f"{skill_dir}: no skill.json (workers load the skill from a saved "
@@ -95,7 +95,7 @@ class RunnerSpec:
 
     def build(self, meshcat=None) -> RolloutRunner:
         from drake_skill.skill import Skill
-        from drake_skill.station.config import load_scenario
+        from drake_skill.station.scenario import load_scenario
 
         station_config = load_scenario(data=self.station_yaml)     # the dumped Scenario, checked again
         skill = Skill.load(self.skill_dir)

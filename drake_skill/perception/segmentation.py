@@ -66,7 +66,7 @@ import math
 import numpy as np
 from scipy import ndimage
 
-from drake_skill import configs
+from drake_skill import typed_yaml
 from drake_skill.common import N_POINTS
 
 __all__ = [
@@ -163,7 +163,7 @@ class SegmentationConfig:
 
     def validate(self) -> "SegmentationConfig":
         """Raises ValueError naming the field that cannot work; returns self."""
-        bad = functools.partial(configs.bad, "segmentation config")
+        bad = functools.partial(typed_yaml.bad, "segmentation config")
 
         for name in ("workspace_min", "workspace_max"):
             v = getattr(self, name)

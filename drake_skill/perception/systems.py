@@ -136,7 +136,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.perception import PointCloud
 from pydrake.systems.framework import LeafSystem, ValueProducer
 
-from drake_skill import configs
+from drake_skill import typed_yaml
 from drake_skill.perception.features import GoalFeatures
 from drake_skill.perception.pcae import (CODE_SIZE, N_POINTS, PointCloudAutoencoder, check_points,
                                          cloud_in_object_frame, load_pcae)
@@ -183,7 +183,7 @@ class ObjectSegmenterConfig:
 
     def validate(self) -> "ObjectSegmenterConfig":
         """Raises ValueError naming the field that cannot work; returns self."""
-        bad = functools.partial(configs.bad, "object segmenter config")
+        bad = functools.partial(typed_yaml.bad, "object segmenter config")
 
         if not (math.isfinite(self.period_s) and self.period_s > 0):
             bad("period_s", self.period_s, "a positive period [s]")

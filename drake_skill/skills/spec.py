@@ -13,9 +13,9 @@ import numpy as np
 from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RotationMatrix
 
-from drake_skill import configs
-from drake_skill.configs import load_typed
-from drake_skill.station.config import (SCENARIO_DIR, Scenario, SuccessConfig, load_scenario,
+from drake_skill import typed_yaml
+from drake_skill.typed_yaml import load_typed
+from drake_skill.station.scenario import (SCENARIO_DIR, Scenario, SuccessConfig, load_scenario,
                                         object_joint_name, validate_success)
 from drake_skill.station.limits import FINGER_MAX
 
@@ -119,8 +119,8 @@ class SkillSpec:
 
 
 def _bad(where: str, field: str, value, expected: str):
-    """The one error format of drake-skill's configurations (``drake_skill.configs.bad``)."""
-    configs.bad(f"skill file {where}", field, value, expected)
+    """The one error format of drake-skill's configurations (``drake_skill.typed_yaml.bad``)."""
+    typed_yaml.bad(f"skill file {where}", field, value, expected)
 
 
 def _check(spec: SkillSpec, where: str) -> SkillSpec:

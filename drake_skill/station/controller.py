@@ -27,7 +27,7 @@ from pydrake.systems.framework import BasicVector, Diagram, DiagramBuilder, Leaf
 
 from drake_skill.station import limits
 from drake_skill.station.models import add_package_paths, hand_mount, instance_directives, robot_directives
-from drake_skill.station.config import ControllerConfig
+from drake_skill.station.scenario import ControllerConfig
 
 # Hand frame H is the flange turned -45 degrees about z (Franka Hand mounting; the
 # robot's directives, models/panda_robot.dmd.yaml, say so once and X_FLANGE_HAND reads it);

@@ -3,7 +3,7 @@
 (No ``from __future__ import annotations`` here: yaml_load_typed reads the
 field types at run time.)
 
-The scenario's ``driver`` (``drake_skill.station.config.Scenario.driver``)
+The scenario's ``driver`` (``drake_skill.station.scenario.Scenario.driver``)
 says what sits between the station's command input and the arm; the station
 factory (:func:`drake_skill.station.make.make_station`) dispatches on its
 type, as the ``manipulation`` repository's ``MakeHardwareStation`` dispatches
@@ -31,7 +31,7 @@ import functools
 import math
 import typing
 
-from drake_skill import configs
+from drake_skill import typed_yaml
 
 __all__ = ["CAMERA_SOURCES", "DRIVER_TYPES", "EndEffectorDriver", "JointSetpointDriver", "PandaLcmDriver",
            "WorkspaceConfig", "driver_tag", "require_panda_driver",
@@ -130,7 +130,7 @@ def validate_driver(driver, diff_ik_period: float, what: str = "scenario") -> No
     diff_ik_period: the scenario's ``controller.diff_ik_period`` [s]; a robot's
     status may not go stale for less than one IK period.
     """
-    bad = functools.partial(configs.bad, what)
+    bad = functools.partial(typed_yaml.bad, what)
     if not isinstance(driver, DRIVER_TYPES):
         bad("driver", driver, "one of " + ", ".join(f"!{t.__name__}" for t in DRIVER_TYPES))
     if not isinstance(driver, PandaLcmDriver):

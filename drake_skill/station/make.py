@@ -10,7 +10,7 @@ Both stations export the ports of ``drake_skill.station.interface``.
 
 from __future__ import annotations
 
-from drake_skill.station.config import Scenario, validate_scenario
+from drake_skill.station.scenario import Scenario, validate_scenario
 
 __all__ = ["make_station"]
 

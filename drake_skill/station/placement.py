@@ -14,7 +14,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RollPitchYaw
 
 if TYPE_CHECKING:   # annotations only: station.config validates a scenario with object_parts
-    from drake_skill.station.config import Scenario
+    from drake_skill.station.scenario import Scenario
 
 
 def nominal_object_pose(config: Scenario) -> RigidTransform:

@@ -2,7 +2,7 @@
 
 docs/method.md section 4: reported success rates in simulation use the
 simulator's ground truth. A skill's success rule (its skill file's
-``success``, :class:`~drake_skill.station.config.SuccessConfig`) reads the
+``success``, :class:`~drake_skill.station.scenario.SuccessConfig`) reads the
 object's joint, which the station's ``object_state`` port gives (a lid's
 angle [rad], a drawer's travel [m]): its final value must be at or above
 ``above`` (Open: past the lid's tipping angle, so that a lid judged open stays
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drake_skill.station.config import SuccessConfig
+from drake_skill.station.scenario import SuccessConfig
 
 #: Contact force below this counts as "not touching" in the settle phase [N].
 TOUCH_FORCE_N = 1e-3

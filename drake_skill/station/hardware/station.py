@@ -78,7 +78,7 @@ from pydrake.systems.sensors import PixelType
 from drake_skill.station import recording as _recording
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.controller import EndEffectorController, make_control_plant
-from drake_skill.station.config import Scenario, validate_scenario
+from drake_skill.station.scenario import Scenario, validate_scenario
 from drake_skill.station.drivers import PandaLcmDriver, require_panda_driver
 from drake_skill.station.reflex import add_reflex_monitor
 

@@ -20,7 +20,7 @@ outputs
                          simulation only, used to judge success, never to reward.
 
 Physics choices (documented here because they decide what a skill must do;
-the values are the scenario's, ``drake_skill.station.config``):
+the values are the scenario's, ``drake_skill.station.scenario``):
 
 * The plant is discrete (SAP) with point contact; every surface's friction,
   stiffness and dissipation are set from ``config.contact``.
@@ -71,7 +71,7 @@ from pydrake.common.value import AbstractValue, Value
 
 from drake_skill.station.controller import X_HAND_TCP, EndEffectorController, add_arm_and_hand, make_finger_limiter
 from drake_skill.station.models import add_package_paths, add_panda_illustration, process_directives
-from drake_skill.station.config import Scenario, validate_scenario
+from drake_skill.station.scenario import Scenario, validate_scenario
 from drake_skill.station.drivers import JointSetpointDriver
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.reflex import RobotSceneContactForce, add_reflex_monitor, robot_scene_pairs

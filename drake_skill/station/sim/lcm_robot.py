@@ -45,7 +45,7 @@ from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubsc
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, StateInterpolatorWithDiscreteDerivative
 from pydrake.systems.sensors import ImageToLcmImageArrayT
 
-from drake_skill.station.config import Scenario, validate_scenario
+from drake_skill.station.scenario import Scenario, validate_scenario
 from drake_skill.station.drivers import JointSetpointDriver, PandaLcmDriver, require_panda_driver
 from drake_skill.station.make import make_station
 from drake_skill.station.success import judge_success

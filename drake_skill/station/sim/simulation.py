@@ -21,7 +21,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_skill.station.config import Scenario
+from drake_skill.station.scenario import Scenario
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
 from drake_skill.station.recording import RunLog, StationRecorder
 from drake_skill.station.make import make_station

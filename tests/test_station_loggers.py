@@ -1,4 +1,4 @@
-"""The loggers of a run (drake_skill.station.records) on a stand-in station: no plant, fixed numbers.
+"""The loggers of a run (drake_skill.station.loggers) on a stand-in station: no plant, fixed numbers.
 
 The stand-in has the station's three output ports, each the discrete state of a counter that a
 periodic update every 1 ms advances, so that the value a logger sees at each step end is known.
@@ -11,7 +11,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
 
-from drake_skill.station.records import StationLoggers, StationRecords, _interval_peaks
+from drake_skill.station.loggers import StationLoggers, StationRecords, _interval_peaks
 
 STEP = 1e-3
 # The reflex's f_hat at update k (k = 0 the initial state): not monotonic, so a peak

@@ -32,9 +32,9 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.multibody.tree import ModelInstanceIndex
 from pydrake.systems.sensors import CameraConfig
 
-from drake_skill import configs
+from drake_skill import typed_yaml
 from drake_skill.common import look_at
-from drake_skill.configs import load_typed
+from drake_skill.typed_yaml import load_typed
 from drake_skill.perception.segmentation import CLUSTER_RULES, VALUE_MIN
 from drake_skill.station import limits, models
 from drake_skill.station.drivers import EndEffectorDriver, JointSetpointDriver, PandaLcmDriver, validate_driver
@@ -317,7 +317,7 @@ class Scenario:
 
 
 # ----------------------------------------------------------------------------- validation
-_bad = functools.partial(configs.bad, "scenario")
+_bad = functools.partial(typed_yaml.bad, "scenario")
 
 
 def _number(field, value, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False, what="a number"):
@@ -554,7 +554,7 @@ def _validate_directives(config: Scenario) -> None:
     for name in ROBOT_MODELS:
         if name not in added:
             _bad("directives", added, f"the robot's models ({', '.join(ROBOT_MODELS)}): start the list with the "
-                 f"robot's directives (drake_skill/station/config.py ROBOT_DIRECTIVES: {ROBOT_FILE} and the table)")
+                 f"robot's directives (drake_skill/station/scenario.py ROBOT_DIRECTIVES: {ROBOT_FILE} and the table)")
     obj = config.object
     if obj.model not in added:
         _bad("object.model", obj.model, f"the name of a model the directives add ({', '.join(added)})")
@@ -607,7 +607,7 @@ def _directives_plant(key: tuple):
 def validate_success(rule: SuccessConfig, field: str = "success", what: str = "scenario") -> SuccessConfig:
     """Raises ValueError naming the field of a success rule that cannot work (``what``: the
     configuration it is in); returns it."""
-    _bad = functools.partial(configs.bad, what)
+    _bad = functools.partial(typed_yaml.bad, what)
     if not rule.joint:
         _bad(f"{field}.joint", rule.joint, "the name of the object's joint the rule reads")
     if (rule.above is None) == (rule.below is None):
