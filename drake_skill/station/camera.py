@@ -101,7 +101,7 @@ from pydrake.systems.primitives import ConstantValueSource
 from pydrake.systems.sensors import CameraInfo, ImageRgba8U, PixelType, RgbdSensor
 
 __all__ = ["CropWindow", "CroppedColorCamera", "ObjectCamera", "add_object_camera", "add_render_scene",
-           "color_padding", "crop_camera_info", "crop_window", "object_swept_points"]
+           "color_padding", "crop_camera_info", "crop_window", "export_camera_ports", "object_swept_points"]
 
 MARGIN_PX = 6
 """Pixels added on every side of the swept volume's projection."""
@@ -324,6 +324,24 @@ class CroppedColorCamera(LeafSystem):
         output.get_mutable_value().mutable_data[:] = image.data[self._rows, self._cols]
 
 
+def export_camera_ports(builder, info: CameraInfo, X_WC: RigidTransform, color, depth, label,
+                        prefix: str = "") -> None:
+    """Exports a camera's ``{prefix}color_image``, ``{prefix}depth_image`` (32F, m) and
+    ``{prefix}label_image`` (output ports ``color``, ``depth``, ``label``) and their world-frame
+    cloud ``{prefix}point_cloud`` (xyz + rgb): Drake's ``DepthImageToPointCloud`` with the camera
+    pose X_WC from a constant source, so the cloud's cache does not depend on the robot's state.
+    The simulated and the hardware station wire their full frame and their object crop with it."""
+    to_cloud = builder.AddNamedSystem(f"{prefix}depth_to_cloud", DepthImageToPointCloud(
+        info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
+    builder.Connect(depth, to_cloud.depth_image_input_port())
+    builder.Connect(color, to_cloud.color_image_input_port())
+    pose = builder.AddNamedSystem(f"{prefix}camera_pose", ConstantValueSource(AbstractValue.Make(X_WC)))
+    builder.Connect(pose.get_output_port(), to_cloud.camera_pose_input_port())
+    builder.ExportOutput(to_cloud.point_cloud_output_port(), f"{prefix}point_cloud")
+    for name, port in (("color_image", color), ("depth_image", depth), ("label_image", label)):
+        builder.ExportOutput(port, f"{prefix}{name}")
+
+
 def add_object_camera(builder, station, color_camera: ColorRenderCamera, depth_camera: DepthRenderCamera,
                       parent_id, X_PC: RigidTransform, margin_px: int = MARGIN_PX) -> ObjectCamera:
     """Adds the object camera next to the full-frame camera described by ``color_camera`` /
@@ -357,16 +375,6 @@ def add_object_camera(builder, station, color_camera: ColorRenderCamera, depth_c
     color_image = builder.AddNamedSystem("object_color_camera",
                                          CroppedColorCamera(color_camera, window, parent_id, X_PC))
     builder.Connect(scene.get_query_output_port(), color_image.get_input_port())
-    to_cloud = builder.AddNamedSystem("object_depth_to_cloud", DepthImageToPointCloud(
-        info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
-    builder.Connect(sensor.depth_image_32F_output_port(), to_cloud.depth_image_input_port())
-    builder.Connect(color_image.get_output_port(), to_cloud.color_image_input_port())
-    # A constant camera pose keeps the cloud's cache independent of the robot's state.
-    pose = builder.AddNamedSystem("object_camera_pose", ConstantValueSource(AbstractValue.Make(X_WC)))
-    builder.Connect(pose.get_output_port(), to_cloud.camera_pose_input_port())
-    camera = ObjectCamera(window, info, sensor, color_padding=color_image.padding)
-    builder.ExportOutput(to_cloud.point_cloud_output_port(), camera.cloud_port_name)
-    builder.ExportOutput(color_image.get_output_port(), camera.image_port_names[0])
-    builder.ExportOutput(sensor.depth_image_32F_output_port(), camera.image_port_names[1])
-    builder.ExportOutput(sensor.label_image_output_port(), camera.label_port_name)
-    return camera
+    export_camera_ports(builder, info, X_WC, color_image.get_output_port(), sensor.depth_image_32F_output_port(),
+                        sensor.label_image_output_port(), prefix="object_")
+    return ObjectCamera(window, info, sensor, color_padding=color_image.padding)

@@ -69,11 +69,9 @@ from pydrake.lcm import DrakeLcm
 from pydrake.manipulation import PandaStatusReceiver, SchunkWsgCommandSender
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import ContactResults
-from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.framework import Diagram, DiagramBuilder, EventStatus, LeafSystem
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource, Multiplexer
-from pydrake.systems.sensors import PixelType
 
 from drake_skill.station import recording as _recording
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
@@ -561,6 +559,9 @@ class HardwareStation(Diagram):
         self.set_name("hardware_station")
 
     def _add_camera(self, builder) -> None:
+        from drake_skill.station.camera import (MARGIN_PX, ObjectCamera, crop_camera_info, crop_window,
+                                                export_camera_ports, object_swept_points)
+
         driver = self.driver
         info, X_WC = camera_geometry(self.config)
         self.camera_info, self._X_WC = info, X_WC
@@ -577,34 +578,17 @@ class HardwareStation(Diagram):
             builder.Connect(self._camera_sub.get_output_port(), images.get_input_port())
             color, depth, label = (images.GetOutputPort(name) for name in ("color_image", "depth_image",
                                                                            "label_image"))
-        to_cloud = builder.AddNamedSystem("depth_to_cloud", DepthImageToPointCloud(
-            info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
-        builder.Connect(depth, to_cloud.depth_image_input_port())
-        builder.Connect(color, to_cloud.color_image_input_port())
-        pose = builder.AddNamedSystem("camera_pose", ConstantValueSource(AbstractValue.Make(X_WC)))
-        builder.Connect(pose.get_output_port(), to_cloud.camera_pose_input_port())
-        builder.ExportOutput(to_cloud.point_cloud_output_port(), "point_cloud")
-        builder.ExportOutput(color, "color_image")
-        builder.ExportOutput(depth, "depth_image")
-        builder.ExportOutput(label, "label_image")
+        export_camera_ports(builder, info, X_WC, color, depth, label)
         # The object camera: the same crop of the frame as the simulated station's.
-        from drake_skill.station.camera import (MARGIN_PX, ObjectCamera, crop_camera_info, crop_window,
-                                                object_swept_points)
-
         window = crop_window(object_swept_points(_ObjectModel(self.config)), X_WC, info, MARGIN_PX)
         crop_info = crop_camera_info(info, window)
         crop = builder.AddNamedSystem("object_crop", ImageCrop(window))
         for name, port in (("color_image", color), ("depth_image", depth), ("label_image", label)):
             builder.Connect(port, crop.GetInputPort(name))
-        crop_cloud = builder.AddNamedSystem("object_depth_to_cloud", DepthImageToPointCloud(
-            crop_info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
-        builder.Connect(crop.GetOutputPort("object_depth_image"), crop_cloud.depth_image_input_port())
-        builder.Connect(crop.GetOutputPort("object_color_image"), crop_cloud.color_image_input_port())
-        builder.Connect(pose.get_output_port(), crop_cloud.camera_pose_input_port())
+        export_camera_ports(builder, crop_info, X_WC, *(crop.GetOutputPort(f"object_{name}") for name in
+                                                        ("color_image", "depth_image", "label_image")),
+                            prefix="object_")
         self.object_camera = ObjectCamera(window, crop_info, None)
-        builder.ExportOutput(crop_cloud.point_cloud_output_port(), self.object_camera.cloud_port_name)
-        for name in ("color_image", "depth_image", "label_image"):
-            builder.ExportOutput(crop.GetOutputPort(f"object_{name}"), f"object_{name}")
 
     def _add_meshcat(self, builder, meshcat, q_port, opening_input) -> None:
         """The arm, hand and table of the scenario in Meshcat, posed by the measured joints."""

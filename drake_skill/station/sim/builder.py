@@ -61,13 +61,12 @@ from pydrake.multibody.meshcat import ContactVisualizer, ContactVisualizerParams
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import BodyIndex, PdControllerGains
-from pydrake.perception import BaseField, DepthImageToPointCloud
 from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import (ConstantValueSource, ConstantVectorSource, Demultiplexer, MatrixGain,
+from pydrake.systems.primitives import (ConstantVectorSource, Demultiplexer, MatrixGain,
                                         Multiplexer, PassThrough)
-from pydrake.systems.sensors import PixelType, RgbdSensor
-from pydrake.common.value import AbstractValue, Value
+from pydrake.systems.sensors import RgbdSensor
+from pydrake.common.value import Value
 
 from drake_skill.station.controller import X_HAND_TCP, EndEffectorController, add_arm_and_hand, make_finger_limiter
 from drake_skill.station.models import add_package_paths, add_panda_illustration, process_directives
@@ -360,7 +359,7 @@ class Station(Diagram):
             else RenderEngineVtkParams(backend="EGL")
         # The cameras render a scene of their own (drake_skill/station/camera.py): the
         # plant's SceneGraph then carries no renderer to update at every step.
-        from drake_skill.station.camera import add_object_camera, add_render_scene
+        from drake_skill.station.camera import add_object_camera, add_render_scene, export_camera_ports
         self.render_scene = add_render_scene(builder, self, cam.renderer_name, MakeRenderEngineVtk(renderer))
         color, depth = cam.MakeCameras()
         info = color.core().intrinsics()
@@ -374,19 +373,8 @@ class Station(Diagram):
         # at camera.fps. (Holding the images in a ZeroOrderHold instead cost
         # ~10 ms per frame in state copies; Drake's RgbdSensorDiscrete would also
         # render a 16-bit depth image.)
-        to_cloud = builder.AddNamedSystem("depth_to_cloud", DepthImageToPointCloud(
-            info, PixelType.kDepth32F, 1.0, BaseField.kXYZs | BaseField.kRGBs))
-        builder.Connect(sensor.depth_image_32F_output_port(), to_cloud.depth_image_input_port())
-        builder.Connect(sensor.color_image_output_port(), to_cloud.color_image_input_port())
-        # The camera is fixed in the world: a constant pose keeps the cloud's
-        # cache independent of the robot's state.
-        camera_pose = builder.AddNamedSystem("camera_pose", ConstantValueSource(AbstractValue.Make(self._X_WC)))
-        builder.Connect(camera_pose.get_output_port(), to_cloud.camera_pose_input_port())
-        builder.ExportOutput(to_cloud.point_cloud_output_port(), "point_cloud")
-        builder.ExportOutput(sensor.color_image_output_port(), "color_image")
-        builder.ExportOutput(sensor.depth_image_32F_output_port(), "depth_image")
-        # The label image is ground truth for tests and data generation.
-        builder.ExportOutput(sensor.label_image_output_port(), "label_image")
+        export_camera_ports(builder, info, self._X_WC, sensor.color_image_output_port(),
+                            sensor.depth_image_32F_output_port(), sensor.label_image_output_port())
         self.camera_info = info
         # The perception systems read the crop of this camera where the object can
         # appear (object_point_cloud etc.; drake_skill/station/camera.py).
