@@ -416,9 +416,12 @@ def test_end_effector_controller_ik_parameters_and_reset():
     assert controller.GetSubsystemByName("rate_limiter") is limiter
     assert [controller.get_output_port(i).get_name() for i in range(2)] == \
         ["panda_state_desired", "joint_acceleration_commanded"]
-    assert controller.get_input_port().get_name() == "X_WE_desired"
+    assert [controller.get_input_port(i).get_name() for i in range(2)] == ["X_WE_desired", "robot_state"]
     np.testing.assert_array_equal(controller._q_home, q_home)
     context = controller.CreateDefaultContext()
+    # A default context holds the rate limiter at rest at home (a run's reset is SetDefaultContext).
+    np.testing.assert_array_equal(controller.GetOutputPort("panda_state_desired").Eval(context),
+                                  np.r_[q_home, np.zeros(7)])
     q = q_home + 0.1
     controller.set_joint_positions(context, q.tolist())
     np.testing.assert_array_equal(controller.GetOutputPort("panda_state_desired").Eval(context), np.r_[q, np.zeros(7)])

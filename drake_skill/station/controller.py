@@ -168,11 +168,14 @@ class RateLimiter(LeafSystem):
     reading it every period only in the steps after a change of the
     reference inside an update (differential IK's output, every 10 ms: a
     1 ms delay at a 2 ms plant step; ``tools/check_physics.py`` checks it).
+
+    ``initial`` (n, default zeros): the positions the limiter rests at in a
+    default context, so that ``SetDefaultContext`` starts a run at home.
     """
 
     def __init__(self, n: int, period: float, bandwidth: float, v_max, a_max, j_max,
                  reference_period: float, reference_scale: float = 1.0, lower=None, upper=None,
-                 update_period: float | None = None):
+                 update_period: float | None = None, initial=None):
         super().__init__()
         self._n, h, w = int(n), float(period), float(bandwidth)
         update = h if update_period is None else float(update_period)
@@ -192,19 +195,23 @@ class RateLimiter(LeafSystem):
         self._lower = None if lower is None else per_joint(lower)
         self._upper = None if upper is None else per_joint(upper)
         self._ref = self.DeclareVectorInputPort("reference", n)
-        self._x = self.DeclareDiscreteState(5 * n)
+        self._x = self.DeclareDiscreteState(self._rest(np.zeros(n) if initial is None else initial))
         self.DeclarePeriodicDiscreteUpdateEvent(self._substeps * h, 0.0, self._update)
         self.DeclareVectorOutputPort("state", 2 * n, self._calc_state, {self.xd_ticket()})
         self.DeclareVectorOutputPort("acceleration", n, self._calc_accel, {self.xd_ticket()})
 
-    def set_position(self, context, q) -> None:
-        """Starts the limiter at rest at positions q."""
+    def _rest(self, q) -> np.ndarray:
+        """The state [q_c, v_c, a, r_prev, r_dot] at rest at positions q: [q, 0, 0, q, 0]."""
         n = self._n
-        q = np.asarray(q, dtype=float)
+        q = np.broadcast_to(np.asarray(q, dtype=float), (n,))
         x = np.zeros(5 * n)
         x[:n] = q
         x[3 * n:4 * n] = q
-        context.get_mutable_discrete_state(self._x).SetFromVector(x)
+        return x
+
+    def set_position(self, context, q) -> None:
+        """Starts the limiter at rest at positions q."""
+        context.get_mutable_discrete_state(self._x).SetFromVector(self._rest(q))
 
     def _update(self, context, discrete_state):
         # This runs at 1 kHz in Python for n <= 7: on Python floats it costs a
@@ -228,15 +235,20 @@ class RateLimiter(LeafSystem):
         output.SetFromVector(x[2 * self._n:3 * self._n])
 
 
-def make_finger_limiter(config: ControllerConfig, update_period: float | None = None) -> RateLimiter:
+def make_finger_limiter(config: ControllerConfig, update_period: float | None = None,
+                        opening: float = 0.0) -> RateLimiter:
     """Opening w [m] in -> both fingers' commanded [q, q, v, v] out, each at w / 2
     within its travel, at most ``limits.FINGER_SPEED_MAX``; ``update_period`` as
-    :class:`RateLimiter`'s."""
-    return _FingerLimiter(config, update_period)
+    :class:`RateLimiter`'s; at rest at ``opening`` [m] in a default context."""
+    return _FingerLimiter(config, update_period, opening)
+
+
+def _half_opening(opening: float) -> float:
+    return float(np.clip(opening / 2, 0.0, limits.FINGER_MAX))
 
 
 class _FingerLimiter(Diagram):
-    def __init__(self, config: ControllerConfig, update_period: float | None = None):
+    def __init__(self, config: ControllerConfig, update_period: float | None = None, opening: float = 0.0):
         super().__init__()
         from pydrake.systems.primitives import MatrixGain
 
@@ -245,7 +257,7 @@ class _FingerLimiter(Diagram):
         limiter = builder.AddNamedSystem("limiter", RateLimiter(
             2, config.limiter_period, config.limiter_bandwidth, limits.FINGER_SPEED_MAX,
             FINGER_ACCEL_MAX, 100.0 * FINGER_ACCEL_MAX, config.diff_ik_period, reference_scale=0.5,
-            lower=0.0, upper=limits.FINGER_MAX, update_period=update_period))
+            lower=0.0, upper=limits.FINGER_MAX, update_period=update_period, initial=_half_opening(opening)))
         builder.Connect(split.get_output_port(), limiter.get_input_port())
         builder.ExportInput(split.get_input_port(), "opening")
         builder.ExportOutput(limiter.GetOutputPort("state"), "finger_state_desired")
@@ -253,7 +265,7 @@ class _FingerLimiter(Diagram):
         self.limiter = limiter
 
     def set_opening(self, context, opening: float) -> None:
-        half = float(np.clip(opening / 2, 0.0, limits.FINGER_MAX))
+        half = _half_opening(opening)
         self.limiter.set_position(self.limiter.GetMyMutableContextFromRoot(context), [half, half])
 
 
@@ -268,6 +280,11 @@ class EndEffectorController(Diagram):
     velocity, acceleration and jerk limits (updated every ``update_period``,
     see :class:`RateLimiter`). The arm's kinematics are those of ``directives``
     (the scenario's; :func:`make_control_plant`).
+
+    A default context starts the rate limiter at rest at ``q_home``; the IK's
+    integrator starts, at ``Initialize``, at the positions of the optional input
+    ``robot_state`` (14: the arm's [q, v]) when it is connected, else call
+    :meth:`set_joint_positions`.
     """
 
     def __init__(self, config: ControllerConfig, q_home, update_period: float | None = None, directives=None):
@@ -297,9 +314,12 @@ class EndEffectorController(Diagram):
             plant, plant.world_frame(), plant.GetFrameByName("ee"), config.diff_ik_period, params, context, True))
         self._limiter = builder.AddNamedSystem("rate_limiter", RateLimiter(
             7, config.limiter_period, config.limiter_bandwidth, limits.QD_MAX, limits.QDD_MAX,
-            limits.QDDD_MAX, config.diff_ik_period, update_period=update_period))
+            limits.QDDD_MAX, config.diff_ik_period, update_period=update_period, initial=q_home))
         builder.Connect(self._diff_ik.GetOutputPort("joint_positions"), self._limiter.get_input_port())
         builder.ExportInput(self._diff_ik.GetInputPort("X_AE_desired"), "X_WE_desired")
+        # Optional: the arm's measured state [q, v] (14); connected, Drake's integrator starts at
+        # its q in an initialization event (it still integrates open loop afterwards).
+        builder.ExportInput(self._diff_ik.GetInputPort("robot_state"), "robot_state")
         builder.ExportOutput(self._limiter.GetOutputPort("state"), "panda_state_desired")
         builder.ExportOutput(self._limiter.GetOutputPort("acceleration"), "joint_acceleration_commanded")
         builder.BuildInto(self)

@@ -236,7 +236,8 @@ class Station(Diagram):
 
         self.ee_controller = self._add_arm_driver(builder, scene)
         # Opening w -> each finger at w/2, at most the hand's finger speed.
-        gripper = builder.AddNamedSystem("gripper", make_finger_limiter(config.controller, config.time_step))
+        gripper = builder.AddNamedSystem("gripper", make_finger_limiter(
+            config.controller, config.time_step, config.gripper_home))
         self.gripper = gripper
         builder.Connect(gripper.GetOutputPort("finger_state_desired"), plant.get_desired_state_input_port(hand))
         builder.ExportInput(gripper.GetInputPort("opening"), "gripper_command")
@@ -312,6 +313,8 @@ class Station(Diagram):
         controller = builder.AddNamedSystem("ee_controller", EndEffectorController(
             config.controller, np.asarray(config.q_home, dtype=float), config.time_step, config.directives))
         builder.Connect(controller.GetOutputPort("panda_state_desired"), desired)
+        # The IK's integrator starts where the arm is, in an initialization event.
+        builder.Connect(scene.plant.get_state_output_port(scene.panda), controller.GetInputPort("robot_state"))
         builder.ExportInput(controller.GetInputPort("X_WE_desired"), "ee_pose_desired")
         builder.ExportOutput(controller.GetOutputPort("joint_acceleration_commanded"),
                              "joint_acceleration_commanded")
@@ -421,18 +424,15 @@ class Station(Diagram):
         self.plant.SetPositions(plant_context, positions)
 
     def reset(self, context, seed: int | None = None) -> RigidTransform:
-        """Prepares a context that was just set to its defaults (``SetDefaultContext``)
-        for a run: places the object at the pose drawn from ``seed`` (the nominal
-        pose when ``seed`` is None), locks it, and starts the hand controller and
-        the finger rate limiter at rest at the home positions. ``context`` is this station's or a root context
-        containing it. Returns X_WO.
+        """Places the object at the pose drawn from ``seed`` (the nominal pose when ``seed``
+        is None) and locks it, in a context just set to its defaults at t = 0
+        (``SetDefaultContext``): a run's reset is that, then ``Initialize``. Everything
+        else starts from its declared default: the arm and fingers at home, the IK
+        integrator and both rate limiters at rest there, the reflex filter at rest.
+        ``context`` is this station's or a root context containing it. Returns X_WO.
         """
         X_WO = self.nominal_object_pose() if seed is None else self.random_object_pose(seed)
         self.set_object_pose(context, X_WO)
-        if self.ee_controller is not None:     # joint set points come from outside
-            self.ee_controller.set_joint_positions(context, self.config.q_home)
-        self.gripper.set_opening(context, self.config.gripper_home)
-        self.reflex_monitor.start(self.reflex_monitor.GetMyMutableContextFromRoot(context))
         return X_WO
 
 
