@@ -96,7 +96,7 @@ def test_a_directive_naming_no_frame_or_model_is_named_by_its_index(child, expec
     """A scenario's weld to a frame or model that does not exist: Drake's RuntimeError (a traceback,
     once) becomes one line naming the directive (issue 47)."""
     from drake_skill.skills import scenario_for_skill
-    from drake_skill.station.sim.builder import build_station
+    from drake_skill.station.make import make_station
 
     config = scenario_for_skill("open")
     config.enable_camera = False
@@ -104,7 +104,7 @@ def test_a_directive_naming_no_frame_or_model_is_named_by_its_index(child, expec
                   if d.add_weld is not None and d.add_weld.child == "table::table_top"]
     weld.child = child
     with pytest.raises(ValueError) as raised:
-        build_station(config)
+        make_station(config)
     message = str(raised.value)
     assert message.startswith(f"scenario directives[{i}] (add_weld {{parent: world, child: {child}}}): ")
     assert expected in message and message.endswith("; fix that directive") and "\n" not in message

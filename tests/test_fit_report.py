@@ -9,7 +9,7 @@ import pytest
 from drake_skill.demos.format import Demonstration
 from drake_skill.skills import scenario_for_skill
 from drake_skill.station.recording import pose_to_vector
-from drake_skill.station.sim.builder import build_station
+from drake_skill.station.make import make_station
 from drake_skill.workflow.fit_report import SegmentTrack, segment_warnings, track_segment
 
 
@@ -28,7 +28,7 @@ def test_a_colour_range_cutting_the_opened_lid_is_a_warning(value_min):
     config = scenario_for_skill("open")
     if value_min is not None:        # the opened lid's shaded faces fall under it
         config.object.colour.value_min = value_min
-    station = build_station(config)
+    station = make_station(config)
     track = track_segment(station, _lid_opening(station, config), every_s=0.25)
     assert len(track.times) == 13 and [w for w, _, _ in track.snapshots] == ["start", "object first moves", "end"]
     assert track.snapshots[1][1] == pytest.approx(0.05) and track.snapshots[2][0:2] == ("end", 3.0)
@@ -89,13 +89,13 @@ def test_a_schema_2_demo_is_reported_from_its_stored_counts_and_frames(tmp_path,
     re-posed, and a robot's demonstration gets its panel too."""
     from types import SimpleNamespace
 
-    import drake_skill.station.sim.builder as builder
+    import drake_skill.station.make as make
     from drake_skill.workflow.fit_report import HUE, segment_tracks, write_fit_report
 
     def no_reposing(*args, **kwargs):
         raise AssertionError("a schema-2 demonstration was re-posed")
 
-    monkeypatch.setattr(builder, "build_station", no_reposing)
+    monkeypatch.setattr(make, "make_station", no_reposing)
     skill = SimpleNamespace(name="open", info={}, station_config=no_reposing,
                             goal_data=lambda points, valid, X_WO=None: np.zeros((len(points), 2)),
                             pomrp=SimpleNamespace(posteriors=lambda G: (None, np.full((len(G), 2), 0.5), None)))

@@ -174,7 +174,7 @@ def test_a_kinesthetic_recording_is_warned_by_its_external_torques():
     driver's status by hand: joint 4's external torque rises to 70 % of its 27 N m limit
     at 0.5 s. The recorder keeps the filtered torque's peak and time; the warning names them."""
     from drake_skill.station.drivers import PandaLcmDriver
-    from drake_skill.station.hardware.station import build_hardware_station
+    from drake_skill.station.make import make_station
     from drake_skill.station.pose_source import PoseTrajectorySource, hold_plan
     from drake_skill.station.recording import StationRecorder
 
@@ -183,7 +183,7 @@ def test_a_kinesthetic_recording_is_warned_by_its_external_torques():
     config.enable_camera = False
     lcm = DrakeLcm("memq://")
     builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", build_hardware_station(config, lcm=lcm, commanding=False))
+    station = builder.AddNamedSystem("station", make_station(config, hardware=True, lcm=lcm, commanding=False))
     hold = builder.AddNamedSystem("hold", PoseTrajectorySource())
     builder.Connect(hold.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
     builder.Connect(hold.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))

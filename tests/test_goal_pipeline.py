@@ -14,7 +14,7 @@ from drake_skill.perception.pcae import cloud_in_object_frame
 from drake_skill.perception.segmentation import fit_table_plane, process_frame
 from drake_skill.reward.systems import add_goal_pipeline
 from drake_skill.skill import default_skill_config, fit_skill
-from drake_skill.station.sim.builder import build_station
+from drake_skill.station.make import make_station
 from drake_skill.skills import scenario_for_skill
 from drake_skill.station.pose_source import PoseTrajectorySource
 from drake_skill.demos.scripted import scripted_plan
@@ -76,7 +76,7 @@ def test_rollout_return_equals_offline_return_of_its_clouds(skill, monkeypatch):
 
     monkeypatch.setattr(systems.ObjectSegmenter, "_calc_frame", counted)
     builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", build_station(scenario_for_skill("close")))
+    station = builder.AddNamedSystem("station", make_station(scenario_for_skill("close")))
     source = builder.AddNamedSystem("plan", PoseTrajectorySource())
     builder.Connect(source.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
     builder.Connect(source.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))

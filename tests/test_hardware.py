@@ -34,10 +34,9 @@ from drake_skill.action.quaternion import make_quaternions_continuous
 from drake_skill.demos.format import downsample_action
 from drake_skill.learning.rollout import ActionModel, RolloutConfig, RolloutRunner
 from drake_skill.station import limits
-from drake_skill.station.sim.builder import build_station
+from drake_skill.station.make import make_station
 from drake_skill.skills import scenario_for_skill
-from drake_skill.station.hardware.station import (STATUS_CHECK_PERIOD, ReflexError, StaleStatusError, StatusMonitor,
-                                          build_hardware_station)
+from drake_skill.station.hardware.station import STATUS_CHECK_PERIOD, ReflexError, StaleStatusError, StatusMonitor
 from drake_skill.station.scenario import load_scenario
 from drake_skill.station.drivers import PandaLcmDriver
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource
@@ -57,9 +56,10 @@ def _scenario(skill="draw", camera=False):
 
 
 def _hardware_config(station_config):
-    """The scenario with the Panda's LCM driver on an in-process (``memq://``) LCM."""
-    station_config.driver = PandaLcmDriver(lcm_url="memq://")
-    return station_config
+    """A copy of the scenario with the Panda's LCM driver on an in-process (``memq://``) LCM."""
+    config = copy.deepcopy(station_config)
+    config.driver = PandaLcmDriver(lcm_url="memq://")
+    return config
 
 
 @pytest.mark.parametrize("camera", [False, True])
@@ -68,8 +68,8 @@ def test_ports_match_the_simulated_station(camera):
                                                station_ports as _ports)
 
     station_config = _scenario("open", camera)
-    sim = build_station(station_config)
-    hardware = build_hardware_station(_hardware_config(station_config), lcm=DrakeLcm("memq://"))
+    sim = make_station(station_config)
+    hardware = make_station(_hardware_config(station_config), hardware=True, lcm=DrakeLcm("memq://"))
     # Both are the one declared station, with its ports and their types.
     declared = {**OUTPUTS, **(CAMERA_OUTPUTS if camera else {})}
     for station in (sim, hardware):
@@ -90,7 +90,8 @@ def test_ports_match_the_simulated_station(camera):
     else:      # with Meshcat drawing the measured arm, the same ports
         from pydrake.geometry import Meshcat
 
-        drawn = build_hardware_station(_hardware_config(station_config), lcm=DrakeLcm("memq://"), meshcat=Meshcat())
+        drawn = make_station(_hardware_config(station_config), hardware=True, lcm=DrakeLcm("memq://"),
+                             meshcat=Meshcat())
         assert _ports(drawn) == (hw_in, hw_out)
 
 
@@ -139,7 +140,7 @@ def test_greedy_policy_on_the_simulated_robot_matches_direct_simulation(draw_ski
     hardware_config.driver.status_timeout = 0.3
     hardware_config.reflex.enabled = False
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
-    runner = RolloutRunner(model, config=rollout, station=build_hardware_station(hardware_config, lcm=lcm))
+    runner = RolloutRunner(model, config=rollout, station=make_station(hardware_config, hardware=True, lcm=lcm))
     robot.start(seed=5)
     try:
         on_robot = runner.run(model.initial_dmp.weights, seed=5)
@@ -187,7 +188,7 @@ def test_a_learning_run_on_the_simulated_robot(tmp_path, tmp_path_factory):
     lcm = DrakeLcm("memq://")
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
     runner = RolloutRunner(Skill.load(shared["skill_dir"]), config=rollout_config(),
-                           station=build_hardware_station(hardware_config, lcm=lcm))
+                           station=make_station(hardware_config, hardware=True, lcm=lcm))
     robot.start(seed=3)
     try:
         outcome = learn(shared["skill_dir"], tmp_path / "learn", LearnConfig(episodes=1, rollouts=2, held_out=0,
@@ -246,7 +247,7 @@ def test_refinement_on_the_simulated_robot_brings_its_path_to_the_demonstration(
     hardware_config.reflex.enabled = False
     lcm = DrakeLcm("memq://")
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
-    station = build_hardware_station(hardware_config, lcm=lcm)
+    station = make_station(hardware_config, hardware=True, lcm=lcm)
     placed = []
     robot.start(seed=3)
     try:
@@ -315,7 +316,7 @@ def _harness(hardware_config, lcm, recorder=None):
     """The hardware station driven by a PoseTrajectorySource; with ``recorder`` (a
     :class:`_Recorder`), also a subscriber that records every command on the wire."""
     builder = DiagramBuilder()
-    station = builder.AddSystem(build_hardware_station(hardware_config, lcm=lcm))
+    station = builder.AddSystem(make_station(hardware_config, hardware=True, lcm=lcm))
     source = builder.AddSystem(PoseTrajectorySource())
     builder.Connect(source.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
     builder.Connect(source.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))
@@ -417,7 +418,7 @@ def test_pressing_into_the_table_trips_the_shared_reflex():
 def test_reset_without_a_robot_says_what_to_check():
     hardware_config = _hardware_config(_scenario("open"))
     hardware_config.driver.reset_timeout = 0.2
-    station = build_hardware_station(hardware_config, lcm=DrakeLcm("memq://"))
+    station = make_station(hardware_config, hardware=True, lcm=DrakeLcm("memq://"))
     with pytest.raises(StaleStatusError, match="no robot status within 0.2 s.*driver"):
         station.reset(station.CreateDefaultContext(), 0)
 
@@ -463,7 +464,7 @@ def test_measured_external_torque_goes_to_the_shared_reflex_check():
     ``robot_scene_contact``; on the robot that is the driver's external torque."""
     hardware_config = _hardware_config(_scenario("open"))
     lcm = DrakeLcm("memq://")
-    station = build_hardware_station(hardware_config, lcm=lcm)
+    station = make_station(hardware_config, hardware=True, lcm=lcm)
     context = station.CreateDefaultContext()
     msg = _status()
     msg.joint_position = list(hardware_config.q_home)
@@ -512,7 +513,7 @@ def test_camera_over_lcm_gives_the_object_pose():
     lcm = DrakeLcm("memq://")
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
     builder = DiagramBuilder()
-    station = builder.AddSystem(build_hardware_station(hardware_config, lcm=lcm))
+    station = builder.AddSystem(make_station(hardware_config, hardware=True, lcm=lcm))
     segmenter = add_object_segmenter(builder, station)
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
@@ -646,7 +647,6 @@ def test_one_factory_builds_each_driver_and_every_port_carries_what_its_name_say
     the joint set points in (the simulated robot's), never one under the other's name; the robot
     needs a !PandaLcmDriver, and says so in one line."""
     from drake_skill.station.drivers import JointSetpointDriver
-    from drake_skill.station.make import make_station
 
     config = _scenario("open")
     end_effector = make_station(config)

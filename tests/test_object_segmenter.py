@@ -18,7 +18,7 @@ from drake_skill.perception.systems import (
 )
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
 from drake_skill.perception.segmentation import fit_table_plane
-from drake_skill.station.sim.builder import build_station
+from drake_skill.station.make import make_station
 from drake_skill.station.scenario import Scenario
 from drake_skill.skills import scenario_for_skill
 
@@ -28,7 +28,7 @@ class Rig:
 
     def __init__(self, config: Scenario, segmenter_config: ObjectSegmenterConfig | None = None):
         builder = DiagramBuilder()
-        self.station = builder.AddNamedSystem("station", build_station(config))
+        self.station = builder.AddNamedSystem("station", make_station(config))
         self.source = builder.AddNamedSystem("plan", PoseTrajectorySource())
         builder.Connect(self.source.GetOutputPort("X_WE_desired"), self.station.GetInputPort("ee_pose_desired"))
         builder.Connect(self.source.GetOutputPort("gripper_command"), self.station.GetInputPort("gripper_command"))

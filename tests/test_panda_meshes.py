@@ -122,10 +122,10 @@ def test_each_mesh_sits_on_its_body(sdf_plant):
 
 def test_meshcat_receives_the_franka_meshes():
     """The station drawn in Meshcat: the page holds the glTF files' bytes."""
-    from drake_skill.station.sim.builder import build_station
+    from drake_skill.station.make import make_station
 
     meshcat = Meshcat()
-    station = build_station(_no_camera(), meshcat=meshcat)
+    station = make_station(_no_camera(), meshcat=meshcat)
     Simulator(station).Initialize()  # MeshcatVisualizer sends the scene on initialisation
     assert meshcat.HasPath("/drake/visualizer/panda/panda_link1")
     # Every glTF the import tool writes names its source in asset.copyright;

@@ -134,11 +134,11 @@ def _run_pipeline(skill, plan_for, seed, duration):
 
     from drake_skill.reward.systems import add_goal_pipeline
     from drake_skill.station.pose_source import PoseTrajectorySource
-    from drake_skill.station.sim.builder import build_station
+    from drake_skill.station.make import make_station
     from drake_skill.skills import scenario_for_skill
 
     builder = DiagramBuilder()
-    station = builder.AddNamedSystem("station", build_station(scenario_for_skill("close")))
+    station = builder.AddNamedSystem("station", make_station(scenario_for_skill("close")))
     source = builder.AddNamedSystem("plan", PoseTrajectorySource())
     builder.Connect(source.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
     builder.Connect(source.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))

@@ -229,7 +229,7 @@ def test_object_joint_can_be_set():
 
 def test_more_cameras_are_data_and_export_their_images():
     """A scenario's ``cameras`` render beside the perception camera, which stays the one perception reads."""
-    from drake_skill.station.sim.builder import build_station
+    from drake_skill.station.make import make_station
 
     config = load_scenario(data="""
 cameras:
@@ -240,7 +240,7 @@ cameras:
   renderer_name: vtk
   X_PB: {translation: [0.55, 0.0, 1.2], rotation: !Rpy {deg: [180.0, 0.0, 90.0]}}
 """)
-    station = build_station(config)
+    station = make_station(config)
     context = station.CreateDefaultContext()
     image = station.GetOutputPort("overhead_color_image").Eval(context)
     labels = station.GetOutputPort("overhead_label_image").Eval(context)

@@ -138,7 +138,7 @@ def refine_on_robot(skill, demos, station, iterations: int | None = None, progre
                     prompt=None) -> list[dict]:
     """Refines ``skill``'s DMPs in place with every execution on the robot; returns the report.
 
-    ``station``: a built hardware station (``build_hardware_station``).
+    ``station``: a built hardware station (``make_station(scenario, hardware=True)``).
     Each demonstration takes ``iterations`` + 1 runs (its plain DMP, then
     each refined one); before each, the hand moves to the demonstration's
     start, then ``prompt(seed, X_WO)`` is called as the station's reset hook

@@ -6,13 +6,13 @@ hardware=False, meshcat=None)``, the arm driven as the scenario's ``driver``
 says (``drivers``). The rest of the system sees only the ports:
 
 - ``sim/``: the simulated station.
-  - ``sim.builder``: ``build_station(config)``, the MultibodyPlant diagram;
+  - ``sim.builder``: ``Station``, the MultibodyPlant diagram;
   - ``sim.simulation``: ``StationSimulation``, build once / reset / run;
   - ``sim.lcm_robot``: a simulated Panda behind the Panda driver's LCM
     protocol, the stand-in robot the hardware port is tested against.
 - ``hardware/``: the real robot.
-  - ``hardware.station``: ``build_hardware_station(config)``, the same ports
-    backed by the Panda driver over LCM and a camera.
+  - ``hardware.station``: ``HardwareStation``, the same ports backed by the
+    Panda driver over LCM and a camera; ``hardware.systems``: its LeafSystems.
 
 Shared by both:
 

@@ -271,7 +271,8 @@ class SuccessConfig:
 
 @dc.dataclass
 class Scenario:
-    """Everything ``build_station`` needs.
+    """Everything ``make_station`` needs: the station's models, object, cameras, controller, reflex,
+    success rule and the arm's driver.
 
     plant: Drake's MultibodyPlantConfig (time step, contact model, SAP...).
     directives: the models, as Drake model directives (``ProcessModelDirectives``;

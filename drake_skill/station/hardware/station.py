@@ -1,7 +1,8 @@
 """The hardware station: the simulated station's ports, backed by a real Panda over LCM.
 
-``build_hardware_station(config)`` returns a :class:`HardwareStation`, a Diagram
-exporting the same ports (names and value types) as ``build_station`` (see
+``make_station(scenario, hardware=True)`` (``drake_skill.station.make``) returns a
+:class:`HardwareStation`, a Diagram exporting the same ports (names and value types) as the
+simulated station (see
 ``drake_skill.station.sim.builder``), so the systems around the station (DMP,
 segmenter, PCAE, reward) and the rollout runner do not know which one they
 hold (docs/architecture.md, "One diagram per skill execution"; the pattern of
@@ -76,7 +77,7 @@ from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 from drake_skill.station.placement import nominal_object_pose, object_parts, random_object_pose
 from drake_skill.station.controller import EndEffectorController
 from drake_skill.station.scenario import Scenario, validate_scenario
-from drake_skill.station.drivers import PandaLcmDriver, require_panda_driver
+from drake_skill.station.drivers import require_panda_driver
 from drake_skill.station.reflex import add_reflex_monitor
 from drake_skill.station.hardware.systems import (  # noqa: F401 (the station's errors and systems, re-exported)
     N_JOINTS, STATUS_CHECK_PERIOD, ForwardKinematics, GroundTruthDecoder, ImageCrop, LcmImageArrayDecoder,
@@ -387,12 +388,3 @@ class HardwareStation(Diagram):
         self.reflex_monitor.start(self.reflex_monitor.GetMyMutableContextFromRoot(context))
         self.placed_pose.set_pose(self.placed_pose.GetMyMutableContextFromRoot(context), X_WO)
         return X_WO
-
-
-def build_hardware_station(config: Scenario | None = None, lcm: DrakeLcm | None = None,
-                           meshcat=None, commanding: bool = True) -> HardwareStation:
-    """Builds the hardware station of the scenario ``config`` (its driver a ``!PandaLcmDriver``;
-    default: the Open scene on LCM's default URL); ``drake_skill.station.make.make_station``
-    with ``hardware=True`` does the same."""
-    config = config if config is not None else Scenario(driver=PandaLcmDriver())
-    return HardwareStation(config, lcm=lcm, meshcat=meshcat, commanding=commanding)

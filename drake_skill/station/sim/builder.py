@@ -1,6 +1,6 @@
 """The simulated station: Panda, table, one articulated object and a Kinect-like camera.
 
-``build_station(config)`` returns a :class:`Station`, a Diagram whose exported
+``make_station(scenario)`` (``drake_skill.station.make``) returns a :class:`Station`, a Diagram whose exported
 ports are the contract every other system of drake-skill talks to. The
 hardware station (``drake_skill.station.hardware.station``) exports the same names, as
 ``MakeHardwareStation`` does in the ``manipulation`` course repository:
@@ -434,8 +434,3 @@ class Station(Diagram):
         X_WO = self.nominal_object_pose() if seed is None else self.random_object_pose(seed)
         self.set_object_pose(context, X_WO)
         return X_WO
-
-
-def build_station(config: Scenario | None = None, meshcat=None) -> Station:
-    """Builds the simulated station described by ``config`` (defaults: the Open scenario)."""
-    return Station(config if config is not None else Scenario(), meshcat=meshcat)
