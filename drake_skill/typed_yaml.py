@@ -98,12 +98,39 @@ def _fields(schema) -> dict | None:
     return None
 
 
-def _unknown_key(field: str, key: str, valid) -> str:
+def _unknown_key(field: str, key: str, valid, kind=None) -> str:
     import difflib
 
     near = difflib.get_close_matches(key, list(valid), n=1)
+    deeper = None if near or kind is None else _where_key_lives(kind, key, field)
     return (f"field '{field or '(top level)'}': unknown key '{key}'; valid keys: {', '.join(valid) or '(none)'}"
-            + (f"; did you mean '{near[0]}'?" if near else ""))
+            + (f"; did you mean '{near[0]}'?" if near else "")
+            + (f"; '{key}' is a key of {deeper}" if deeper else ""))
+
+
+def _where_key_lives(kind, key: str, field: str, depth: int = 3) -> str | None:
+    """Where below ``kind`` a field named ``key`` is (``'driver' (!PandaLcmDriver)``), for a key
+    written one level too high (a configuration's field that moved into a nested one); None if nowhere."""
+    import typing
+
+    fields = _fields(kind)
+    if fields is None or depth == 0:
+        return None
+    for name, sub in fields.items():
+        path = f"{field}.{name}" if field else name
+        options = [a for a in typing.get_args(sub) if a is not type(None)] \
+            if typing.get_origin(sub) is typing.Union else [sub]
+        for option in options:
+            inner = _fields(option)
+            if inner is None:
+                continue
+            tag = f" (!{option.__name__})" if len(options) > 1 else ""
+            if key in inner:
+                return f"'{path}'{tag}"
+            found = _where_key_lives(option, key, path, depth - 1)
+            if found:
+                return found
+    return None
 
 
 _SCALARS = {int: "an integer", float: "a number", str: "a string", bool: "true or false"}
@@ -150,7 +177,7 @@ def _check(kind, value, field: str) -> str | None:
         return None
     for key, item in value.items():
         if key not in fields:
-            return _unknown_key(field, str(key), fields)
+            return _unknown_key(field, str(key), fields, kind)
         found = _check(fields[key], item, f"{field}.{key}" if field else str(key))
         if found:
             return found

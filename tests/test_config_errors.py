@@ -177,3 +177,20 @@ def test_scenario_text_overrides_are_layered_after_the_file_and_named_in_errors(
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"drake-skill: error: --scenario {path}: scenario ({path} + override 'object: {{x: 3}}'): "
                           "scenario field 'object.x/object.y' = (3.0, 0.0)") and "\n" not in err, err
+
+
+def test_a_key_written_one_level_too_high_is_pointed_to_where_it_lives(tmp_path):
+    """An old hardware file (``lcm_url:`` at the top, before the channels moved into the scenario's
+    ``driver: !PandaLcmDriver``) and a colour bound outside ``object.colour`` are told where the key lives."""
+    path = tmp_path / "hardware.yaml"
+    path.write_text("lcm_url: memq://\n")
+    with pytest.raises(ValueError) as raised:
+        load_typed(Scenario, what="scenario", path=path)
+    assert str(raised.value).endswith("; 'lcm_url' is a key of 'driver' (!PandaLcmDriver)")
+    path.write_text("object: {hue_min_deg: 3}\n")
+    with pytest.raises(ValueError) as raised:
+        load_typed(Scenario, what="scenario", path=path)
+    assert str(raised.value).endswith("unknown key 'hue_min_deg'; valid keys: model, base_body, joint, x, y, yaw, "
+                                      "initial_joint, randomize_xy, randomize_yaw, gravity, joint_damping, "
+                                      "joint_friction, joint_friction_gain, colour, footprint_heights; "
+                                      "'hue_min_deg' is a key of 'object.colour'")
