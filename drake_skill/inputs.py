@@ -97,8 +97,3 @@ def scenario(base, path: Path | None = None, texts=(), option: str = "--scenario
         label = f"{option} {path}" if path is not None else "--scenario-text"
         raise ValueError(f"{label}: {' '.join(str(e).split())}") from e
 
-
-def station_config(skill, scenario_path: Path | None, texts=()):
-    """The station of ``skill``: its shipped scenario, overridden by the user's ``--scenario`` YAML
-    and ``--scenario-text`` (:func:`scenario`)."""
-    return scenario(skill, scenario_path, texts)

@@ -86,9 +86,9 @@ def test_a_damaged_skill_file(tmp_path, data):
 @SETTINGS
 @given(data=damaged(SCENARIO, text=True))
 def test_a_damaged_scenario(tmp_path, data):
-    from drake_skill.inputs import station_config
+    from drake_skill.inputs import scenario
 
-    _check(lambda p: station_config("open", p), tmp_path / "scene.yaml", data)
+    _check(lambda p: scenario("open", p), tmp_path / "scene.yaml", data)
 
 
 @SETTINGS

@@ -192,7 +192,7 @@ def test_a_rendered_flap_turned_from_the_light_stays_in_the_segment(flap_skill):
     from drake_skill.skills.camera_check import check_camera
 
     spec = errors.skill(str(flap_skill))
-    config = errors.station_config(spec, None)
+    config = errors.scenario(spec, None)
     config.object.randomize_xy = config.object.randomize_yaw = 0.0
     new = [f.kept_fraction for f in check_camera(config, spec.name, n_joints=5, n_poses=1).frames]
     config.object.colour.value_min, config.object.colour.cluster_rule = 0.15, "largest"

@@ -196,7 +196,7 @@ def record(args) -> int:
         errors.input_file(args.config, "--config", "a YAML file of DemonstratorConfig fields")
     config = load_demonstrator_config(args.config) if args.config else DemonstratorConfig()
     spec = errors.skill(args.skill)
-    station_config = errors.station_config(spec, args.scenario, args.scenario_text) \
+    station_config = errors.scenario(spec, args.scenario, args.scenario_text) \
         if args.scenario or args.scenario_text else None
     count = args.count or config.count or int(spec.demonstrations)
     seed = config.seed if args.seed is None else args.seed
@@ -290,7 +290,7 @@ def replay(args) -> int:
     configs = {}
     for d in demos:
         if d.skill not in configs:
-            configs[d.skill] = errors.station_config(d.skill, args.scenario, args.scenario_text)
+            configs[d.skill] = errors.scenario(d.skill, args.scenario, args.scenario_text)
     from pydrake.geometry import Meshcat
     meshcat = Meshcat()
     written = [write_replay(d, out / Path(d.path).with_suffix(".html").name, configs[d.skill], meshcat)

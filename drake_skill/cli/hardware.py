@@ -273,8 +273,8 @@ def _refine(args) -> int:
     skill = Skill.load(args.skill_dir)
     demos = load_demonstrations(args.demos, skill=skill.name)
     check_demo_pairs(skill, demos, f"--demos {args.demos}")
-    config = load_config(args.station_config, args.lcm_url, skill.name, texts=args.scenario_text)
-    config.enable_camera = False           # the placed pose is the object frame: no camera needed
+    # The placed pose is the object frame: no camera needed.
+    config = load_config(args.station_config, args.lcm_url, skill.name, camera=False, texts=args.scenario_text)
     station = make_station(config, hardware=True)
     runs = len(demos) * (args.iterations + 1)
     print(f"refining {len(demos)} DMPs of {skill.name} on the robot: {runs} runs", flush=True)

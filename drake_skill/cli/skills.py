@@ -92,7 +92,7 @@ def check_camera(args: argparse.Namespace) -> int:
     if args.joints < 1 or args.poses < 1:
         raise ValueError(f"--joints {args.joints} / --poses {args.poses}: expected at least 1 each")
     spec = errors.skill(args.skill, "SKILL")
-    config = errors.station_config(spec, args.scenario, args.scenario_text)
+    config = errors.scenario(spec, args.scenario, args.scenario_text)
     result = camera_check.check_camera(config, spec.name, args.joints, args.poses, args.seed)
     print(json.dumps(result.summary()) if args.json else camera_check.table(result))
     return 0

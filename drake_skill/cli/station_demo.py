@@ -35,7 +35,7 @@ def run_demo(skills, seed: int, out: Path, meshcat=None, realtime: float = 0.0, 
     from drake_skill.station.sim.simulation import StationSimulation
     from drake_skill.station.success import rule_text
     skills = [errors.skill(skill, "--skills") for skill in skills]
-    configs = {spec.name: errors.station_config(spec, scenario, scenario_text) for spec in skills}  # all checked first
+    configs = {spec.name: errors.scenario(spec, scenario, scenario_text) for spec in skills}  # all checked first
     specs, skills = {spec.name: spec for spec in skills}, [spec.name for spec in skills]
     summary, logs = {}, {}
     for skill in skills:
@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         args.skills = [spec.name for spec in shipped_skills() if spec.keyframes]
     if args.scenario is not None or args.scenario_text:
         for skill in args.skills:
-            errors.station_config(skill, args.scenario, args.scenario_text)
+            errors.scenario(skill, args.scenario, args.scenario_text)
     meshcat = None
     if args.meshcat:
         from pydrake.geometry import StartMeshcat

@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from drake_skill.fileio import atomic_write_json, load_json
-from drake_skill.inputs import station_config
+from drake_skill.inputs import scenario
 from drake_skill.learning.evaluation import HELD_OUT_SEED0
 from drake_skill.learning.loop import REWARDS, LearnConfig
 from drake_skill.learning.policy_search import METHODS
@@ -316,7 +316,7 @@ def prepare_config(source: str, station_yaml: Path | None = None, quiet: bool = 
     [--scenario FILE] [--quiet] --fit FIT``: the skill's scenario under ``station_yaml``."""
     from drake_skill.workflow.prepare import PrepareConfig
 
-    return PrepareConfig(skill=str(source), station_for=lambda spec: station_config(spec, station_yaml), fit=fit,
+    return PrepareConfig(skill=str(source), station_for=lambda spec: scenario(spec, station_yaml), fit=fit,
                          quiet=quiet)
 
 
@@ -487,7 +487,7 @@ def _runner_specs(out: Path, config: GridConfig, skill_dir, station_yaml, rollou
     dirs = prepare_skills(out, config.sources, skill_dir=skill_dir, station_yaml=station_yaml, quiet=quiet,
                           fit=config.fit)
     rollout_config = (rollout_config or RolloutConfig()).validate()
-    return {s: RunnerSpec.create(dirs[s], station_config(config.sources[s], station_yaml), rollout_config)
+    return {s: RunnerSpec.create(dirs[s], scenario(config.sources[s], station_yaml), rollout_config)
             for s in config.skills}
 
 

@@ -10,7 +10,7 @@ Both stations export the ports of ``drake_skill.station.interface``.
 
 from __future__ import annotations
 
-from drake_skill.station.scenario import Scenario, validate_scenario
+from drake_skill.station.scenario import Scenario
 
 __all__ = ["make_station"]
 
@@ -26,7 +26,7 @@ def make_station(scenario: Scenario | None = None, hardware: bool = False, meshc
     driver's URL) and ``commanding`` (False: only listen, e.g. while a person guides
     the arm) apply to the robot only. ``meshcat`` draws the station in Meshcat.
     """
-    scenario = validate_scenario(scenario if scenario is not None else Scenario())
+    scenario = scenario if scenario is not None else Scenario()     # each station validates it
     if not hardware:
         from drake_skill.station.sim.builder import Station
 
