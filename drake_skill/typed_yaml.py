@@ -108,18 +108,24 @@ def _unknown_key(field: str, key: str, valid, kind=None) -> str:
             + (f"; '{key}' is a key of {deeper}" if deeper else ""))
 
 
+def _union_options(kind) -> list | None:
+    """The types of ``typing.Union[...]`` (``Optional``'s None left out), or None for another type."""
+    import typing
+
+    if typing.get_origin(kind) is not typing.Union:
+        return None
+    return [a for a in typing.get_args(kind) if a is not type(None)]
+
+
 def _where_key_lives(kind, key: str, field: str, depth: int = 3) -> str | None:
     """Where below ``kind`` a field named ``key`` is (``'driver' (!PandaLcmDriver)``), for a key
     written one level too high (a configuration's field that moved into a nested one); None if nowhere."""
-    import typing
-
     fields = _fields(kind)
     if fields is None or depth == 0:
         return None
     for name, sub in fields.items():
         path = f"{field}.{name}" if field else name
-        options = [a for a in typing.get_args(sub) if a is not type(None)] \
-            if typing.get_origin(sub) is typing.Union else [sub]
+        options = _union_options(sub) or [sub]
         for option in options:
             inner = _fields(option)
             if inner is None:
@@ -154,7 +160,7 @@ def _check(kind, value, field: str) -> str | None:
         return None
     origin, args = typing.get_origin(kind), typing.get_args(kind)
     if origin is typing.Union:
-        options = [a for a in args if a is not type(None)]
+        options = _union_options(kind)
         if len(options) == 1:
             return _check(options[0], value, field)
         return _check_variant(options, value, field)
