@@ -74,6 +74,12 @@ def test_the_study_runs_learns_defaults_on_every_shipped_skill(capsys):
     learn = config.learn_config("pi2-es-cov", "dense", 2)
     assert (learn.episodes, learn.rollouts, learn.seed, learn.select) == (5, 6, 2, "guarded")
     assert config.settings()["select"] == "guarded"
+    assert learn.exploration == "basis" and "exploration" not in config.settings()   # stored studies unchanged
+    span = generalization_config(exploration="span").validate()
+    assert span.learn_config("pi2-es-cov", "dense", 0).exploration == "span"
+    assert span.settings()["exploration"] == "span"          # a resume with the other exploration is refused
+    with pytest.raises(ValueError, match="--exploration wide: unknown; give basis or span"):
+        generalization_config(exploration="wide").validate()
     assert main(["experiment", "generalization", "--out", "/dev/null/x", "--report-only"]) == 2
     assert "--out" in capsys.readouterr().err
 

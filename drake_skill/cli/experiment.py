@@ -5,7 +5,7 @@
                                [--held-out 10] [--seed0 0] [--workers N] [--ray | --ray-address ADDR]
                                [--out results/experiment]
     drake-skill experiment report OUT [--table FILE] [--report-dir DIR]
-    drake-skill experiment generalization [--skills ...] [--runs 5] [--workers N]
+    drake-skill experiment generalization [--skills ...] [--runs 5] [--workers N] [--exploration basis|span]
                                           [--out docs/results/generalization]
 
 ``run``: for each skill the scripted demonstrations are recorded and the
@@ -73,6 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                          help="shipped skills' names or skill files (default: every shipped skill)")
     general.add_argument("--runs", type=int, default=5, help="seeds per skill (default 5)")
     general.add_argument("--workers", type=int, default=None, help="runs at a time (default: one per CPU)")
+    general.add_argument("--exploration", choices=("basis", "span"), default="basis",
+                         help="what each run's search varies, as learn --exploration (default basis; span "
+                              "writes the same study for the demonstrations' span, docs/method.md 5.2)")
     general.add_argument("--out", type=Path, default=Path("docs") / "results" / "generalization",
                          help="the study's folder (default docs/results/generalization)")
     general.add_argument("--report-only", action="store_true", help="rewrite the report from the stored runs only")
@@ -170,7 +173,7 @@ def _generalization(args) -> int:
     errors.output_folder(args.out, "--out", what="the generalization study")
     failed = []
     if not args.report_only:
-        config = generalization_config(args.skills, args.runs)
+        config = generalization_config(args.skills, args.runs, args.exploration)
         outcome = run_grid(args.out, config, rollout_config=RolloutConfig(), workers=args.workers,
                            progress=not args.quiet, quiet=args.quiet)
         print(f"{outcome.ran} run(s) finished in {outcome.wall_s:.0f} s on {outcome.workers} worker(s); "

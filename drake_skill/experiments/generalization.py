@@ -46,13 +46,14 @@ CRITERIA = {"reward_auc": 0.95, "mean_after": 0.9, "worst_after": 0.8, "max_drop
 METHOD, REWARD = "pi2-es-cov", "dense"
 
 
-def generalization_config(skills=None, runs: int = 5):
-    """The grid of the study: ``learn``'s defaults on every skill (default: all shipped)."""
+def generalization_config(skills=None, runs: int = 5, exploration: str = "basis"):
+    """The grid of the study: ``learn``'s defaults on every skill (default: all shipped); ``exploration``
+    "span" runs the same study with ``learn --exploration span`` (docs/method.md 5.2)."""
     from drake_skill.experiments.grid import GridConfig
     from drake_skill.skills import shipped_skill_names
 
     return GridConfig(skills=tuple(skills or shipped_skill_names()), methods=(METHOD,), rewards=(REWARD,),
-                      runs=int(runs), fit="tolerance", select="guarded")
+                      runs=int(runs), fit="tolerance", select="guarded", exploration=exploration)
 
 
 def _rollouts(run_folder: Path) -> list[dict]:
@@ -153,11 +154,15 @@ def _fmt(value, spec=".2f") -> str:
     return "-" if value is None else format(value, spec)
 
 
-def readme_text(summary: dict, rows) -> str:
+def readme_text(summary: dict, rows, exploration: str = "basis") -> str:
     """README.md: what ran, a line per skill, the criteria marked."""
-    lines = ["# Generalization: learning on every skill with `drake-skill learn`'s defaults", "",
+    title, search = "`drake-skill learn`'s defaults", "PI^2-ES-Cov"
+    if exploration != "basis":
+        title = f"`drake-skill learn --exploration {exploration}`"
+        search = f"PI^2-ES-Cov over the demonstrations' {exploration} (docs/method.md 5.2)"
+    lines = [f"# Generalization: learning on every skill with {title}", "",
              "Written by `drake-skill experiment generalization` (drake_skill/experiments/generalization.py) "
-             "from the stored runs; rerun it to continue or refresh. Each run: PI^2-ES-Cov, dense learned reward, "
+             f"from the stored runs; rerun it to continue or refresh. Each run: {search}, dense learned reward, "
              "5 x 6 rollouts, tolerance fit, guarded selection (docs/method.md 5.1), 10 held-out poses.",
              f"Code: {summary['code']}.", "",
              "| skill | seeds | reward AUC | verdict FPR | verdict FNR | held-out before | held-out after (per seed) "
@@ -186,6 +191,12 @@ def readme_text(summary: dict, rows) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _exploration(out: Path) -> str:
+    """The study's ``exploration`` (grid.json; absent: "basis")."""
+    path = out / "grid.json"
+    return str(load_json(path).get("exploration", "basis")) if path.is_file() else "basis"
+
+
 def write_report(out, rules: dict | None = None) -> list[Path]:
     """table.csv, summary.json, the figures and README.md of the runs stored in ``out``.
 
@@ -206,5 +217,5 @@ def write_report(out, rules: dict | None = None) -> list[Path]:
     summary = {"code": _code(runs), "skills": skills}
     paths = [atomic_write_text(out / "table.csv", _table_text(rows)),
              atomic_write_json(out / "summary.json", summary),
-             atomic_write_text(out / "README.md", readme_text(summary, rows))]
+             atomic_write_text(out / "README.md", readme_text(summary, rows, _exploration(out)))]
     return [Path(p) for p in paths]

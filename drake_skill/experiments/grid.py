@@ -41,6 +41,7 @@ from typing import Any
 from drake_skill.fileio import atomic_write_json, load_json
 from drake_skill.inputs import scenario
 from drake_skill.learning.evaluation import HELD_OUT_SEED0
+from drake_skill.learning.exploration import EXPLORATIONS
 from drake_skill.learning.loop import REWARDS, LearnConfig
 from drake_skill.learning.policy_search import METHODS
 
@@ -104,6 +105,8 @@ class GridConfig:
       (the default: the thesis's final mean, the chapter-7 grid) or
       "guarded" (``drake-skill learn``'s default, docs/method.md 5.1; the
       generalization study). Stored in ``grid.json`` when not "last".
+    exploration: what each run's search varies (``LearnConfig.exploration``, docs/method.md 5.2):
+      "basis" (the default, thesis Eq. 5.3) or "span". Stored in ``grid.json`` when not "basis".
     """
 
     skills: tuple[str, ...] = ("open", "close")
@@ -118,6 +121,7 @@ class GridConfig:
     keep_skills: bool = False
     fit: str = "thesis"
     select: str = "last"
+    exploration: str = "basis"
     sources: dict[str, str] = dc.field(default_factory=dict)
 
     def validate(self) -> "GridConfig":
@@ -132,6 +136,8 @@ class GridConfig:
                 raise ValueError(f"{flag} {value}: expected at least {least}; give {flag} {max(least, 1)} or more")
         if self.select not in ("last", "guarded"):
             raise ValueError(f"--select {self.select}: unknown rule; give last or guarded")
+        if self.exploration not in EXPLORATIONS:
+            raise ValueError(f"--exploration {self.exploration}: unknown; give {' or '.join(EXPLORATIONS)}")
         if self.fit not in ("thesis", "tolerance"):
             raise ValueError(f"--fit {self.fit}: unknown fit; give thesis or tolerance")
         if "cma-es" in self.methods and int(self.rollouts) < 2:
@@ -152,14 +158,16 @@ class GridConfig:
         every = int(self.rollouts) if method == "power" else 1
         return LearnConfig(method=method, reward=reward, episodes=episodes, rollouts=rollouts,
                            seed=int(self.seed0) + int(run), held_out=0, greedy_every=every,
-                           select=self.select).validate()
+                           select=self.select, exploration=self.exploration).validate()
 
     def settings(self) -> dict[str, Any]:
         """What decides the numbers of a run beyond its cell (kept in ``grid.json``)."""
         fit = {} if self.fit == "thesis" else {"fit": self.fit}
         select = {} if self.select == "last" else {"select": self.select}
+        exploration = {} if self.exploration == "basis" else {"exploration": self.exploration}
         return {"episodes": int(self.episodes), "rollouts": int(self.rollouts), "held_out": int(self.held_out),
-                "held_out_seed0": int(self.held_out_seed0), "seed0": int(self.seed0), **fit, **select}
+                "held_out_seed0": int(self.held_out_seed0), "seed0": int(self.seed0), **fit, **select,
+                **exploration}
 
 
 def run_dir(out, skill: str, method: str, reward: str, run: int) -> Path:
