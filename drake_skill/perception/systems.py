@@ -62,7 +62,10 @@ Outputs, for the current frame when it is valid, otherwise the held ones
   ``default_pose``;
 - ``valid`` (vector 1): 1 when the current frame's largest cluster has at
   least ``min_points`` points, else 0 (object hidden by the arm, out of
-  view or not found; the other outputs then hold the last valid frame).
+  view or not found; the other outputs then hold the last valid frame);
+- ``pixels`` (abstract ``SegmentPixels``): the current frame's colour image
+  and its masks of the object's hue, object-coloured and kept pixels
+  (:meth:`ObjectSegmenter.eval_pixels`; for recordings, which log it per frame).
 
 Input ``point_cloud`` (abstract ``PointCloud`` with xyz and rgb, world frame,
 organised as an ``image_height`` x ``image_width`` image, row-major; missing
@@ -298,6 +301,9 @@ class ObjectSegmenter(LeafSystem):
             "X_WO", lambda: Value(RigidTransform()), self._calc_X_WO, deps)
         self._valid_port = self.DeclareVectorOutputPort(
             "valid", 1, self._calc_valid, {self._frame_cache.ticket()})
+        self._pixels_port = self.DeclareAbstractOutputPort(
+            "pixels", lambda: AbstractValue.Make(object()), self._calc_pixels,
+            {self._frame_cache.ticket(), self._cloud_port.ticket()})
 
     # ---------------------------------------------------------------- ports
     @property
@@ -322,6 +328,9 @@ class ObjectSegmenter(LeafSystem):
     def get_valid_output_port(self):
         return self._valid_port
 
+    def get_pixels_output_port(self):
+        return self._pixels_port
+
     # ------------------------------------------------------------ inspection
     def eval_frame(self, context):
         """The current frame's :class:`~drake_skill.perception.segmentation.FrameResult` (its
@@ -332,7 +341,8 @@ class ObjectSegmenter(LeafSystem):
     def eval_pixels(self, context) -> SegmentPixels:
         """The current frame's colour image and its pixels of the object's hue, object-coloured and
         kept by the segment (:func:`~drake_skill.perception.segmentation.segment_pixels`; nothing
-        kept before the table plane is known). A demonstration's recorder counts them at every frame."""
+        kept before the table plane is known): the ``pixels`` output, which a recording's frame log
+        (``drake_skill.station.loggers.FrameLog``) counts and keeps at every frame."""
         _, rgb = self._read_cloud(context)
         result = self.eval_frame(context)
         return segment_pixels(rgb, self._config.segmentation, self._image_shape,
@@ -416,6 +426,9 @@ class ObjectSegmenter(LeafSystem):
             output.set_value(self._default_X_WO)
         else:
             output.set_value(RigidTransform(RotationMatrix.MakeZRotation(estimate.yaw), estimate.position))
+
+    def _calc_pixels(self, context, output):
+        output.set_value(self.eval_pixels(context))
 
     def _calc_valid(self, context, output):
         output.SetFromVector([1.0 if self._frame_cache.Eval(context).estimate is not None else 0.0])
