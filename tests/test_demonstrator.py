@@ -183,11 +183,9 @@ def test_perception_is_recorded_at_10_hz_on_the_action_instants():
     sim = StationSimulation(scenario_for_skill("open"), perceive=True)
     X_WO = sim.reset(5)
     sim.set_plan(hold_plan(sim.home_pose()))
-    recorder = sim.recorder(100.0, 10.0)
-    assert recorder.anchor() == 0.0
-    for _ in range(101):
-        recorder.sample(0.0)
-    demo = demonstration_from(recorder, "open", 5, X_WO, success=False, metadata={"source": "test"})
+    records = sim.record(100)
+    assert records.times[0] == 0.0 and records.frames.times.tolist() == pytest.approx(np.arange(11) * 0.1)
+    demo = demonstration_from(records, 100.0, 10.0, "open", 5, X_WO, success=False, metadata={"source": "test"})
     assert demo.object_points.shape == (11, 2048, 3) and demo.object_points.dtype == np.float32
     assert demo.perception_valid.all()
     assert demo.times.tolist() == pytest.approx(np.arange(11) * 0.1)
@@ -201,7 +199,9 @@ def test_perception_is_recorded_at_10_hz_on_the_action_instants():
     # The points are the box: inside its footprint in the object frame (closed box, 20 x 30 cm-ish).
     p_O = (np.asarray(X_WO.inverse().GetAsMatrix4()) @ np.c_[demo.object_points[3], np.ones(2048)].T)[:3].T
     assert np.all(np.abs(p_O[:, :2]) < 0.25) and p_O[:, 2].min() > 0.0 and p_O[:, 2].max() < 0.2
-    # The ObjectSegmenter system that executions use gives the same points for the last frame.
+    # The ObjectSegmenter system that executions use gives the same points for the last frame
+    # (the scene at t = 1 s: AdvanceTo(1) leaves the events due then pending).
+    assert sim.context.get_time() == 1.0
     segmenter = ObjectSegmenter(segmenter_config_for_station(sim.config, sim.station.object_camera.window))
     seg_context = segmenter.CreateDefaultContext()
     cloud = sim.station.GetOutputPort("object_point_cloud").Eval(sim.station_context())
@@ -239,13 +239,10 @@ def test_a_recording_keeps_the_segments_pixels_the_peak_force_and_three_frames(t
     home = sim.home_pose()
     above = [RigidTransform(home.rotation(), X_WO @ np.array([0.0, 0.0, z])) for z in (0.25, 0.162)]
     sim.set_plan(PosePlan.from_poses([0.0, 0.6, 1.6, 2.0], [home, above[0], above[1], above[1]], [0.0] * 4))
-    recorder = sim.recorder(100.0, 10.0)
-    recorder.anchor()
-    for _ in range(201):
-        recorder.sample(0.0)
-    demo = demonstration_from(recorder, "open", 5, X_WO, success=False, metadata={"source": "test"})
-    # The peak force per frame is the recorder's over the frame's raw samples (10 k - 9 .. 10 k).
-    force = np.array(recorder.force)
+    records = sim.record(200)
+    demo = demonstration_from(records, 100.0, 10.0, "open", 5, X_WO, success=False, metadata={"source": "test"})
+    # The peak force per frame is the largest of the frame's raw samples' (10 k - 9 .. 10 k).
+    force = records.contact_force
     expected = [force[0]] + [force[10 * k - 9:10 * k + 1].max() for k in range(1, 21)]
     np.testing.assert_array_equal(demo.peak_force, expected)
     assert demo.peak_force.max() == demo.metadata["peak_contact_force_N"] > 10.0       # 16.5 N measured

@@ -135,11 +135,8 @@ def test_a_recording_whose_colour_range_cuts_the_boxs_shaded_faces_warns_from_it
     sim = StationSimulation(config, perceive=True)
     X_WO = sim.reset(0)
     sim.set_plan(hold_plan(sim.home_pose()))
-    recorder = sim.recorder(100.0, 10.0)
-    recorder.anchor()
-    for _ in range(101):
-        recorder.sample(0.0)
-    demo = demonstration_from(recorder, "open", 0, X_WO, success=False, metadata={"source": "scripted"})
+    demo = demonstration_from(sim.record(100), 100.0, 10.0, "open", 0, X_WO, success=False,
+                              metadata={"source": "scripted"})
     assert np.all(demo.pixels_coloured < 0.4 * demo.pixels_hue)
     assert np.all(demo.pixels_kept > 0.95 * demo.pixels_coloured)
     _, warnings = segment_tracks(SimpleNamespace(), [demo])        # no skill: nothing is re-posed

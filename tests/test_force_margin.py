@@ -172,11 +172,12 @@ def _status(q, tau, utime):
 def test_a_kinesthetic_recording_is_warned_by_its_external_torques():
     """The hardware station as ``hardware record-demo`` wires it (nothing commanded), fed the
     driver's status by hand: joint 4's external torque rises to 70 % of its 27 N m limit
-    at 0.5 s. The recorder keeps the filtered torque's peak and time; the warning names them."""
+    at 0.5 s. The loggers keep the filtered torque's peak and time; the warning names them."""
     from drake_skill.station.drivers import PandaLcmDriver
     from drake_skill.station.make import make_station
     from drake_skill.station.pose_source import PoseTrajectorySource, hold_plan
-    from drake_skill.station.recording import StationRecorder
+    from drake_skill.station.loggers import StationLoggers
+    from drake_skill.station.recording import advance_station
 
     config = scenario_for_skill("close")
     config.driver = PandaLcmDriver(lcm_url="memq://", ground_truth_channel="SIM_OBJECT_STATE")
@@ -187,6 +188,7 @@ def test_a_kinesthetic_recording_is_warned_by_its_external_torques():
     hold = builder.AddNamedSystem("hold", PoseTrajectorySource())
     builder.Connect(hold.GetOutputPort("X_WE_desired"), station.GetInputPort("ee_pose_desired"))
     builder.Connect(hold.GetOutputPort("gripper_command"), station.GetInputPort("gripper_command"))
+    loggers = StationLoggers(builder, station, 100.0, gripper_command=hold.GetOutputPort("gripper_command"))
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     simulator = Simulator(diagram, context)
@@ -206,12 +208,12 @@ def test_a_kinesthetic_recording_is_warned_by_its_external_torques():
     X_WE = station.GetOutputPort("ee_pose").Eval(station.GetMyContextFromRoot(context))
     hold.set_plan(hold.GetMyMutableContextFromRoot(context), hold_plan(X_WE, config.gripper_home))
     simulator.Initialize()
-    recorder = StationRecorder(station, context, simulator, 100.0, 10.0)
-    recorder.anchor()
-    for _ in range(101):                                   # 1 s at 100 Hz, ends on a frame
-        publish(recorder.next_time())
-        recorder.sample(0.0)
-    demo = demonstration_from(recorder, "close", 0, X_WO, success=False, metadata={"source": "kinesthetic"})
+    loggers.start(context)
+    for n in range(1, 101):                                # 1 s at 100 Hz, ends on a 10 Hz instant
+        publish(n / 100)
+        advance_station(simulator, station, context, n / 100)
+    demo = demonstration_from(loggers.read(context, 100), 100.0, 10.0, "close", 0, X_WO, success=False,
+                              metadata={"source": "kinesthetic"})
     meta = demo.metadata
     assert meta["peak_contact_force_N"] == 0.0                # the robot does not measure it
     # The filtered torque (10 ms time constant) follows the 0.2 s ramp within 2 %.

@@ -389,9 +389,8 @@ def test_jump_is_rate_limited_clipped_and_stale_status_stops_the_station():
 
 
 def test_pressing_into_the_table_trips_the_shared_reflex():
-    """The recording loop of simulation (record_station and its reflex monitor)
-    decides the reflex on the robot from the driver's external joint torques."""
-    from drake_skill.station.recording import record_station
+    """The reflex monitor of simulation, shared by the hardware station (advanced as every run is,
+    by advance_station), decides the reflex on the robot from the driver's external joint torques."""
 
     hardware_config = _hardware_config(_scenario("open"))
     hardware_config.driver.workspace.lower[2] = -0.3          # let the command go below the table top
@@ -407,7 +406,7 @@ def test_pressing_into_the_table_trips_the_shared_reflex():
                         PosePlan.from_poses([0.0, 0.2, 2.2], [X0, X0, down], [0.0] * 3))
         simulator.Initialize()
         with pytest.raises(ReflexError, match="torque joint") as reflex:
-            record_station(simulator, station, context, 0.0, 400, 100.0)
+            advance_station(simulator, station, context, 4.0)
     finally:
         robot.stop()
     limit = np.asarray(hardware_config.reflex.external_torque_max)

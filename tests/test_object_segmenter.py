@@ -149,8 +149,7 @@ def test_hand_hiding_the_object_clears_the_flag_and_holds_outputs():
     for k in range(41):                     # 4 s at the camera rate
         if k:
             # To the frame instant and through its events (the plant's step, then the
-            # segmenter's update), as StationRecorder samples: the outputs are then
-            # those of the frame the update saw.
+            # segmenter's update): the outputs are then those of the frame the update saw.
             rig.simulator.AdvanceTo(0.1 * k)
             rig.simulator.AdvancePendingEvents()
         log.append(rig.outputs())

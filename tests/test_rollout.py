@@ -171,25 +171,35 @@ def test_the_skill_s_finger_opening_is_commanded(draw_setup):
 
 
 def test_the_loggers_record_what_sampling_the_ports_after_each_advance_gives(draw_setup):
-    """A rollout's records come from the loggers in the diagram (StationLoggers); they
-    equal, bit for bit, a StationRecorder stepping the same rollout sample by sample
-    (the state AdvanceTo(t) leaves, events due at t pending), peak forces included."""
-    from drake_skill.station.recording import StationRecorder
+    """A rollout's records come from the loggers in the diagram (StationLoggers, the one
+    recording path); they equal, bit for bit, the ports read after each AdvanceTo(t) of
+    the same rollout stepped sample by sample from Python (as teleoperation and the
+    hardware recorder step), and the loggers of that stepped run equal the one-advance
+    run's. The interval peaks' running maximum is the reflex monitor's own peak of f_hat,
+    read without changing it."""
+    from drake_skill.station.recording import advance_station
 
     dmp, runner, _ = draw_setup
     logged = runner.run(dmp.weights, 5)
     assert not logged.failed, logged.message
+    one_advance = runner.loggers.read(runner.context, len(logged.times) - 1)
     runner.reset(dmp.weights, 5)
     hz = runner.rollout_config.record_hz
-    recorder = StationRecorder(runner.station, runner.context, runner.simulator, hz)
-    recorder.anchor()
-    recorder.record(len(logged.times) - 1)
+    station, ctx = runner.station, runner.station.GetMyContextFromRoot(runner.context)
+    ports = {name: station.GetOutputPort(name) for name in ("ee_pose", "panda_state", "object_state", "reflex_state")}
+    read = []
+    for k in range(len(logged.times)):
+        advance_station(runner.simulator, station, runner.context, k / hz)
+        read.append({name: pose_to_vector(port.Eval(ctx)) if name == "ee_pose" else np.array(port.Eval(ctx))
+                     for name, port in ports.items()})     # copies: Eval returns the cache's value
     records = runner.loggers.read(runner.context, len(logged.times) - 1)
-    assert np.array_equal(logged.times, recorder.times)
-    assert np.array_equal(logged.ee_pose, np.array(recorder.X_WE))
-    assert np.array_equal(logged.object_state, recorder.obj)
-    assert np.array_equal(records.state[:, :7], np.array(recorder.q))
-    assert np.array_equal(records.contact_force, recorder.force)
+    assert np.array_equal(logged.times, records.times)
+    assert np.array_equal(logged.ee_pose, [r["ee_pose"] for r in read])
+    assert np.array_equal(logged.object_state, [r["object_state"][0] for r in read])
+    assert np.array_equal(records.state, [r["panda_state"] for r in read])
+    for name in ("state", "object_state", "contact_force", "external_torque"):
+        assert np.array_equal(getattr(records, name), getattr(one_advance, name)), name
+    assert np.array_equal(np.maximum.accumulate(records.contact_force), [r["reflex_state"][9] for r in read])
     assert np.max(records.contact_force) > 1.0      # the finger pulls the handle: forces are recorded
 
 

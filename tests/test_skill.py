@@ -13,11 +13,8 @@ def _parked_goal_clouds(demonstrator, seed, duration=6.0):
     sim = demonstrator.sim
     sim.reset(seed)
     sim.set_plan(hold_plan(sim.home_pose()))
-    recorder = sim.recorder(10.0, 10.0)   # frames read from the diagram's ObjectSegmenter
-    recorder.anchor()
-    for _ in range(int(duration * 10) + 1):
-        recorder.sample(0.0)
-    return np.stack(recorder.points), np.array(recorder.valid), recorder.X_WO_perceived
+    frames = sim.record(int(duration * 10), 10.0).frames   # logged from the diagram's ObjectSegmenter
+    return frames.points, frames.valid, frames.X_WO[frames.first_valid]
 
 
 @pytest.fixture(scope="module")

@@ -184,10 +184,12 @@ def _record_demo(args) -> int:
     from drake_skill.cli.demos import warn_force_margin
     from drake_skill.cli.sim_robot import load_config
     from drake_skill.demos.demonstrator import demonstration_from
-    from drake_skill.demos.format import append_demonstration, existing_demo_files, load_demonstrations
+    from drake_skill.demos.format import ACTION_HZ, append_demonstration, existing_demo_files, load_demonstrations
+    from drake_skill.demos.format import ACTION_RAW_HZ as RECORD_HZ
     from drake_skill.station.make import make_station
     from drake_skill.station.pose_source import PoseTrajectorySource, hold_plan
-    from drake_skill.station.recording import StationRecorder, advance_station
+    from drake_skill.station.loggers import StationLoggers
+    from drake_skill.station.recording import advance_station, check_joint_state, vector_to_pose
 
     if not args.duration > 0:
         raise ValueError(f"--duration must be positive, got {args.duration}")
@@ -209,6 +211,10 @@ def _record_demo(args) -> int:
     if config.enable_camera:
         from drake_skill.perception.systems import add_object_segmenter
         segmenter = add_object_segmenter(builder, station)
+    # The one recording path (drake_skill.station.loggers); the hand's width is not read
+    # back: the gripper logged is the hold's command, gripper_home.
+    loggers = StationLoggers(builder, station, RECORD_HZ, segmenter=segmenter,
+                             gripper_command=hold.GetOutputPort("gripper_command"))
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     simulator = Simulator(diagram, context)
@@ -218,32 +224,43 @@ def _record_demo(args) -> int:
     X_WE = station.GetOutputPort("ee_pose").Eval(station.GetMyContextFromRoot(context))
     hold.set_plan(hold.GetMyMutableContextFromRoot(context), hold_plan(X_WE, config.gripper_home))
     simulator.Initialize()
-    advance_station(simulator, station, context, 0.1)   # the status of now, not of the reset, in the first sample
-    frame_hz = float(config.camera.fps) if segmenter is not None else 10.0
-    recorder = StationRecorder(station, context, simulator, 100.0, frame_hz, segmenter)
-    recorder.anchor()
+    # The status of now, not of the reset, in the first sample; the recording starts at a frame.
+    frame_hz = 1.0 / loggers.frame_period if segmenter is not None else ACTION_HZ
+    t_start = math.ceil(0.1 * frame_hz - 1e-9) / frame_hz
+    advance_station(simulator, station, context, t_start)
+    loggers.start(context)
+    k = int(round(RECORD_HZ / frame_hz))
     print(f"recording {args.duration:.0f} s: guide the arm now (Ctrl-C ends early)", flush=True)
-    n = int(math.ceil(args.duration * frame_hz - 1e-9)) * recorder.k + 1
-    grip = float(config.gripper_home)      # the hand's width is not read back
+    n_end = int(math.ceil(args.duration * frame_hz - 1e-9)) * k
+    state = station.GetOutputPort("panda_state")
+
+    def advance(n: int) -> None:    # to sample n, from Python: Ctrl-C lands between samples
+        t = loggers.grid(n, t_start)[-1]
+        advance_station(simulator, station, context, t)
+        check_joint_state(state.Eval(station.GetMyContextFromRoot(context)), t)
+
+    n = 0
     try:
-        for _ in range(n):
-            recorder.sample(grip)
+        while n < n_end:
+            n += 1
+            advance(n)
     except KeyboardInterrupt:
-        while not recorder.at_frame:
-            recorder.sample(grip)
-    obj = np.asarray(recorder.obj)
+        while n % k:                 # end on a frame
+            n += 1
+            advance(n)
+    records = loggers.read(context, n, t_start)
+    obj = records.object_state
     if not np.all(np.isfinite(obj)):
         raise ValueError(f"no object state on {config.driver.ground_truth_channel} during the recording: "
                          "the demonstration format needs it (see drake-skill hardware --help)")
     X_WO = X_WO_placed
-    if recorder.X_WO_perceived is not None:
-        from drake_skill.station.recording import vector_to_pose
-        X_WO = vector_to_pose(recorder.X_WO_perceived)
+    if records.frames is not None and records.frames.first_valid is not None:
+        X_WO = vector_to_pose(records.frames.X_WO[records.frames.first_valid])
     from drake_skill.station.success import judge_success
     success = judge_success(float(obj[-1]), config.success)
     metadata = {"source": "kinesthetic", "lcm_url": config.driver.lcm_url,
                 "X_WO_note": "X_OE uses the perceived X_WO at the first frame (the placed pose without a camera)"}
-    demo = demonstration_from(recorder, skill_name, args.seed, X_WO, success, metadata)
+    demo = demonstration_from(records, RECORD_HZ, frame_hz, skill_name, args.seed, X_WO, success, metadata)
     path = append_demonstration(demo, args.out)      # demos.json updated in the same swap
     print(f"wrote {path}: {demo.duration:.1f} s, final object state {demo.final_object_state:.3f}, "
           f"{'success' if success else 'failure'}")

@@ -56,7 +56,8 @@ from drake_skill.typed_yaml import load_typed
 from drake_skill.demos.format import Demonstration, downsample_action, object_frame_poses, snapshot_frames
 from drake_skill.demos.force_margin import peaks
 from drake_skill.station.pose_source import PosePlan
-from drake_skill.station.recording import ReflexError, StationRecorder, pose_to_vector
+from drake_skill.station.loggers import FrameRecords, StationRecords, frame_peaks
+from drake_skill.station.recording import ReflexError, pose_to_vector
 from drake_skill.station.sim.simulation import StationSimulation
 from drake_skill.station.success import judge_run
 from drake_skill.skills import SkillSpec, keyframes, load_skill
@@ -234,59 +235,59 @@ def humanlike_plan(skill, X_WO: RigidTransform, X_WE_home: RigidTransform, seed:
 
 
 # --------------------------------------------------------------------------- recording
-def demonstration_from(recorder: StationRecorder, skill: str, seed: int, X_WO_true: RigidTransform,
-                       success: bool, metadata: dict) -> Demonstration:
-    """Assembles a :class:`~drake_skill.station.recording.StationRecorder`'s samples
-    (record_hz, frames at action_hz; with perception, the ObjectSegmenter's
-    points, pixel counts and three pictures, ``metadata["snapshot_labels"]``
-    naming them) into a Demonstration (times start at 0). Its metadata gets the
-    reflex monitor's peaks and their times [s]: ``peak_contact_force_N``,
-    ``peak_contact_force_time_s``, ``peak_external_torque_Nm`` (7) and
-    ``peak_external_torque_time_s`` (7) (``drake_skill.demos.force_margin``)."""
-    if not recorder.at_frame:
-        raise ValueError("recording must end on a camera frame (call sample() until at_frame)")
-    if recorder.frame_hz is None:
-        raise ValueError("a demonstration recorder needs frame_hz (the 10 Hz action instants)")
-    times = np.arange(recorder.n_samples) / recorder.record_hz
+def demonstration_from(records: StationRecords, record_hz: float, action_hz: float, skill: str, seed: int,
+                       X_WO_true: RigidTransform, success: bool, metadata: dict) -> Demonstration:
+    """Assembles a recording's samples (:class:`~drake_skill.station.loggers.StationRecords`
+    at ``record_hz``, ending on an action instant; with perception, its camera frames at
+    ``action_hz``: the ObjectSegmenter's points, pixel counts and three pictures,
+    ``metadata["snapshot_labels"]`` naming them) into a Demonstration (times start at 0).
+    Its metadata gets the reflex monitor's peaks and their times [s]:
+    ``peak_contact_force_N``, ``peak_contact_force_time_s``, ``peak_external_torque_Nm``
+    (7) and ``peak_external_torque_time_s`` (7) (``drake_skill.demos.force_margin``)."""
+    n = records.times.size
+    k = int(round(record_hz / action_hz))
+    if n == 0 or (n - 1) % k:
+        raise ValueError(f"a recording of {n} samples at {record_hz:g} Hz does not end on a "
+                         f"{action_hz:g} Hz action instant")
+    times = np.arange(n) / record_hz
     X_WO = pose_to_vector(X_WO_true)
-    X_OE_raw = object_frame_poses(X_WO, np.array(recorder.X_WE))
-    idx, t10, X_OE = downsample_action(times, X_OE_raw, recorder.frame_hz)
-    obj = np.array(recorder.obj)
-    peak_force = np.array(recorder.frame_force, dtype=float)
-    if peak_force.size != idx.size:
-        raise AssertionError(f"{peak_force.size} frame forces for {idx.size} 10 Hz samples")
+    X_OE_raw = object_frame_poses(X_WO, records.ee_pose)
+    idx, t10, X_OE = downsample_action(times, X_OE_raw, action_hz)
+    obj = records.object_state
+    peak_force = frame_peaks(records.contact_force, idx)
     perception = {}
-    if recorder.segmenter is not None:
-        if len(recorder.points) != idx.size:
-            raise AssertionError(f"{len(recorder.points)} camera frames for {idx.size} 10 Hz samples")
-        if recorder.X_WO_perceived is None:
+    frames = records.frames
+    if frames is not None:
+        if not np.array_equal(frames.index, idx):
+            raise ValueError(f"camera frames at samples {frames.index[:3].tolist()}..., the {action_hz:g} Hz "
+                             f"action data at {idx[:3].tolist()}...: the camera must run at action_hz")
+        first = frames.first_valid
+        if first is None:
             raise ValueError(f"{skill} seed {seed}: the segmentation found the object in none of "
-                             f"the {len(recorder.points)} camera frames")
-        perception = dict(object_points=np.stack(recorder.points).astype(np.float32),
-                          perception_valid=np.array(recorder.valid, dtype=bool),
-                          X_WO_start=recorder.X_WO_perceived)
-        segment, labels = _segment_fields(recorder, peak_force, obj[idx])
+                             f"the {idx.size} camera frames")
+        perception = dict(object_points=frames.points, perception_valid=frames.valid, X_WO_start=frames.X_WO[first])
+        segment, labels = _segment_fields(frames, peak_force, obj[idx])
         perception.update(segment)
-        metadata = dict(metadata, X_WO_start_frame=int(recorder.X_WO_frame), snapshot_labels=labels)
+        metadata = dict(metadata, X_WO_start_frame=first, snapshot_labels=labels)
     # The reflex monitor's peaks and their times, for the force margin (drake_skill.demos.force_margin).
-    force, t_force = peaks(times, recorder.force)
-    torque, t_torque = peaks(times, np.reshape(recorder.torque, (-1, 7)))
+    force, t_force = peaks(times, records.contact_force)
+    torque, t_torque = peaks(times, records.external_torque)
     metadata = dict(metadata, peak_contact_force_N=float(force[0]), peak_contact_force_time_s=float(t_force[0]),
                     peak_external_torque_Nm=torque.tolist(), peak_external_torque_time_s=t_torque.tolist())
     return Demonstration(
         skill=skill, seed=int(seed), success=bool(success), final_object_state=float(obj[-1]),
-        times_100hz=times, X_OE_100hz=X_OE_raw, q_100hz=np.array(recorder.q),
-        gripper_100hz=np.array(recorder.grip), object_state_100hz=obj,
+        times_100hz=times, X_OE_100hz=X_OE_raw, q_100hz=records.state[:, :7].copy(),
+        gripper_100hz=records.gripper.copy(), object_state_100hz=obj,
         times=t10, X_OE=X_OE, X_WO_true=X_WO, peak_force=peak_force, metadata=metadata, **perception)
 
 
-def _segment_fields(recorder: StationRecorder, peak_force: np.ndarray,
+def _segment_fields(frames: FrameRecords, peak_force: np.ndarray,
                     object_state: np.ndarray) -> tuple[dict[str, np.ndarray], list[str]]:
-    """The recorder's pixel counts and its start / first contact / end pictures as the
+    """The frames' pixel counts and their start / first contact / end pictures as the
     Demonstration's ``pixels_*`` and ``snapshot_*`` fields, and the pictures' labels."""
     index, labels = snapshot_frames(peak_force, object_state)
-    counts = np.array(recorder.pixel_counts, dtype=np.int64).reshape(-1, 3)
-    shots = [recorder.pixels[k] for k in index]
+    counts = frames.pixel_counts
+    shots = [frames.pixels[k] for k in index]
     return dict(pixels_hue=counts[:, 0], pixels_coloured=counts[:, 1], pixels_kept=counts[:, 2], snapshot_index=index,
                 snapshot_rgb=np.stack([p.rgb for p in shots]),
                 snapshot_segment=np.stack([p.hue.astype(np.uint8) + p.coloured + p.kept for p in shots])), labels
@@ -312,7 +313,8 @@ class ScriptedDemonstrator:
             station_config.enable_camera = False
         elif not station_config.enable_camera:
             raise ValueError("record_perception needs a station with enable_camera = true")
-        self.sim = StationSimulation(station_config, meshcat=meshcat, perceive=self.config.record_perception)
+        self.sim = StationSimulation(station_config, meshcat=meshcat, perceive=self.config.record_perception,
+                                     record_hz=self.config.record_hz)
 
     def record(self, seed: int) -> Demonstration:
         """One demonstration on the object pose and variation drawn from ``seed``.
@@ -324,17 +326,15 @@ class ScriptedDemonstrator:
         X_WO = sim.reset(seed)
         plan, variation = humanlike_plan(self.spec, X_WO, sim.home_pose(), seed, config)
         sim.set_plan(plan)
-        recorder = sim.recorder(config.record_hz, config.action_hz)
-        recorder.anchor()
         duration = plan.duration + max(config.settle_time, sim.config.success.settle_time)
-        n = int(math.ceil(duration * config.action_hz - 1e-9)) * recorder.k + 1
-        for _ in range(n):
-            recorder.sample(plan.opening(recorder.next_time()))
-        success = judge_run(recorder.times, recorder.obj, recorder.force, sim.config.success)
+        k = int(round(config.record_hz / config.action_hz))
+        records = sim.record(int(math.ceil(duration * config.action_hz - 1e-9)) * k)   # from t = 0, a frame
+        success = judge_run(records.times, records.object_state, records.contact_force, sim.config.success)
         metadata = {"source": "scripted", "variation": variation,
                     "demonstrator_config": dc.asdict(config),
                     "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
-        return demonstration_from(recorder, self.skill, seed, X_WO, success, metadata)
+        return demonstration_from(records, config.record_hz, config.action_hz, self.skill, seed, X_WO, success,
+                                  metadata)
 
     def record_many(self, count: int | None = None, progress: bool = True,
                     on_attempt: Callable[[int, Demonstration], None] | None = None) -> list[Demonstration]:

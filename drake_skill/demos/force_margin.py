@@ -15,7 +15,8 @@ is named, with the time and the value of its peak, when it is recorded:
 
 Both are the reflex monitor's filtered values
 (``drake_skill.station.reflex``), the peak over each 100 Hz sample's
-interval, as the recorder keeps them; a demonstration stores the peak of
+interval, as the loggers give them (``drake_skill.station.loggers``, from the
+logged filter state); a demonstration stores the peak of
 each and its time (s from the demonstration's start) in its metadata
 (``drake_skill.demos.demonstrator.demonstration_from``).
 
@@ -53,7 +54,7 @@ class MarginExcess(NamedTuple):
 def peaks(times, values) -> tuple[np.ndarray, np.ndarray]:
     """The peak of each column of ``values`` and the time of its first occurrence.
 
-    times: (T,) [s]; values: (T,) or (T, J) (magnitudes, e.g. the recorder's
+    times: (T,) [s]; values: (T,) or (T, J) (magnitudes, e.g. a recording's
     per-sample peak force or |external torque|). Returns (peak (J,), time (J,))
     (J = 1 for (T,)); zeros for T = 0.
     """

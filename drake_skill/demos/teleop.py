@@ -3,10 +3,12 @@
 The thesis' demonstrator moves the robot's hand by hand (section 6.2). In
 simulation the user drives the hand's desired pose from the Meshcat page
 instead, and the demonstration is recorded exactly as the scripted
-demonstrator records one (``drake_skill.station.recording.StationRecorder``,
-the station's one recording loop, with the diagram's ``ObjectSegmenter``):
-the measured hand pose in the object frame at 100 Hz and 10 Hz, the
-segmented object cloud at 10 Hz.
+demonstrator records one: by the diagram's loggers
+(``drake_skill.station.loggers.StationLoggers``, the one recording path, with
+the diagram's ``ObjectSegmenter``): the measured hand pose in the object frame
+at 100 Hz and 10 Hz, the segmented object cloud at 10 Hz. The session advances
+the simulator from Python in 10 ms steps (it polls the page between them);
+what it records is read from the logs when the recording ends.
 
 Where: ``record_interactive`` opens drake-skill's own page
 (:mod:`drake_skill.demos.teleop_page`, its URL printed): the Meshcat view
@@ -44,6 +46,7 @@ one diagram and records a demonstration.
 """
 
 import dataclasses as dc
+import math
 from typing import Callable
 
 import numpy as np
@@ -51,6 +54,9 @@ from pydrake.common.value import Value
 from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
+
+from drake_skill.demos.format import ACTION_RAW_HZ as RECORD_HZ
+from drake_skill.station.loggers import StationLoggers
 
 
 
@@ -352,6 +358,8 @@ class TeleopSession:
         if self.config.record_perception:
             from drake_skill.perception.systems import add_object_segmenter
             self.segmenter = add_object_segmenter(builder, self.station)
+        self.loggers = StationLoggers(builder, self.station, RECORD_HZ, segmenter=self.segmenter,
+                                      gripper_command=self.teleop.GetOutputPort("gripper_command"))
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         self.simulator = Simulator(self.diagram, self.context)
@@ -362,6 +370,7 @@ class TeleopSession:
         self.diagram.SetDefaultContext(self.context)
         self.context.SetTime(0.0)
         self.X_WO = self.station.reset(self.context, seed)
+        self.loggers.clear(self.context)
         frame_teleop_view(self.meshcat, self.X_WO.translation())   # the view opens on the workspace
         self.teleop.add_controls()
         self.simulator.Initialize()
@@ -401,20 +410,28 @@ class TeleopSession:
                f"{RECORD_BUTTON} (within {config.max_wait:.0f} s); {STOP_BUTTON} ends the demonstration "
                f"(it stops by itself after {config.max_duration:.0f} s)")
         self._wait_for_record(user)
-        recorder, t_start = self._record_until_stop(user, status)
-        demo, why = self._demonstration(recorder, seed, X_WO, t_start)
+        records, t_start = self._record_until_stop(user, status)
+        demo, why = self._demonstration(records, seed, X_WO, t_start)
         status(f"recorded {demo.duration:.1f} s: {'success' if demo.success else 'FAILURE'} ({why})")
         for message in margin_warnings(demo, self.station.config.reflex, f"this demonstration (seed {seed})"):
             status(f"warning: {message}")
         return demo
 
-    def _wait_for_record(self, user) -> None:
-        """Idle until Record: the same loop as a recording (reflex, solver and divergence
-        checks), nothing kept; TimeoutError after ``max_wait`` s."""
-        from drake_skill.station.recording import StationRecorder
+    def _advance(self, t: float) -> None:
+        """To t [s]: the reflex, solver and divergence checks of every run (``station.recording``)."""
+        from drake_skill.station.recording import advance_station, check_joint_state
 
-        idle = StationRecorder(self.station, self.context, self.simulator, 1.0 / self.config.period)
-        idle.anchor()
+        advance_station(self.simulator, self.station, self.context, t)
+        check_joint_state(self.station.GetOutputPort("panda_state").Eval(self.station_context()), t)
+
+    def station_context(self):
+        return self.station.GetMyContextFromRoot(self.context)
+
+    def _wait_for_record(self, user) -> None:
+        """Idle until Record, advancing every ``period`` s (the checks of :meth:`_advance`;
+        the logs are emptied now and then: nothing of the idle time is kept);
+        TimeoutError after ``max_wait`` s."""
+        t0, i = self.context.get_time(), 0
         while self.mode() == IDLE:
             t = self.context.get_time()
             self._show()
@@ -422,40 +439,46 @@ class TeleopSession:
                 raise TimeoutError(f"{RECORD_BUTTON} was not pressed within {self.config.max_wait} s")
             if user is not None:
                 user(t)
-            idle.sample()
-            if idle.n_samples > 1000:
-                idle.reset()
-                idle.anchor()
+            i += 1
+            self._advance(t0 + i * self.config.period)
+            if i % 1000 == 0:
+                self.loggers.clear(self.context)
 
     def _record_until_stop(self, user, status):
-        """Records at 100 Hz (frames at 10 Hz) until Stop or ``max_duration``, on a frame and
-        for at least MIN_SAMPLES frames; returns (the recorder, its start time [s])."""
-        from drake_skill.demos.format import MIN_SAMPLES
-        from drake_skill.station.recording import StationRecorder
+        """Records at RECORD_HZ (frames at ACTION_HZ) from the next frame instant until Stop or
+        ``max_duration``, on a frame and for at least MIN_SAMPLES frames; returns (the
+        records, their start time [s])."""
+        from drake_skill.demos.format import ACTION_HZ, MIN_SAMPLES
 
-        recorder = StationRecorder(self.station, self.context, self.simulator, 100.0, 10.0, self.segmenter)
-        t_start = recorder.anchor()
+        k = int(round(RECORD_HZ / ACTION_HZ))
+        frame = self.loggers.frame_period or 1.0 / ACTION_HZ
+        t_start = math.ceil(self.context.get_time() / frame - 1e-9) * frame
+        if user is not None:
+            user(t_start)
+        self._advance(t_start)
+        self.loggers.start(self.context)
         status(f"recording from t = {t_start:.2f} s")
-        gripper = self.teleop.GetOutputPort("gripper_command")
-        teleop_context = self.teleop.GetMyContextFromRoot(self.context)
-        min_raw = (MIN_SAMPLES - 1) * recorder.k + 1
+        n = 0
         while True:
-            if user is not None:
-                user(recorder.next_time())
-            recorder.sample(float(gripper.Eval(teleop_context)[0]))
             self._show(t_start)
-            done = self.mode() == DONE or recorder.next_time() - t_start > self.config.max_duration
-            if done and recorder.at_frame and recorder.n_samples >= min_raw:
-                return recorder, t_start
+            done = self.mode() == DONE or (n + 1) / RECORD_HZ > self.config.max_duration
+            if done and n % k == 0 and n >= (MIN_SAMPLES - 1) * k:
+                return self.loggers.read(self.context, n, t_start), t_start
+            n += 1
+            t = self.loggers.grid(n, t_start)[-1]
+            if user is not None:
+                user(t)
+            self._advance(t)
 
-    def _demonstration(self, recorder, seed: int, X_WO, t_start: float):
+    def _demonstration(self, records, seed: int, X_WO, t_start: float):
         """(the Demonstration of a finished recording, why its verdict); the page shows the verdict."""
         from drake_skill.demos.demonstrator import demonstration_from
+        from drake_skill.demos.format import ACTION_HZ
         from drake_skill.station.success import judge_run, verdict_why
 
         rule = self.station.config.success
-        success = judge_run(recorder.times, recorder.obj, recorder.force, rule)
-        why = verdict_why(recorder.times, recorder.obj, recorder.force, rule)
+        success = judge_run(records.times, records.object_state, records.contact_force, rule)
+        why = verdict_why(records.times, records.object_state, records.contact_force, rule)
         metadata = {"source": "interactive", "teleop_config": dc.asdict(self.config),
                     "recording_started_at_s": t_start,
                     "X_WO_note": "X_OE uses the ground-truth X_WO_true at the start (simulation)"}
@@ -463,7 +486,7 @@ class TeleopSession:
             if self.page.note:
                 metadata["note"] = self.page.note
             self.page.publish(mode="done", last_verdict="success" if success else "failure", last_why=why)
-        return demonstration_from(recorder, self.skill, seed, X_WO, success, metadata), why
+        return demonstration_from(records, RECORD_HZ, ACTION_HZ, self.skill, seed, X_WO, success, metadata), why
 
 
 KEY_LEGEND = ("W/S x, A/D y, E/Q z\nL/J roll, I/K pitch, O/U yaw\nX/Z gripper open/close\n"

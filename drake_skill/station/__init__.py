@@ -20,12 +20,13 @@ Shared by both:
 - ``config``: the scenario (``Scenario``), loaded from ``scenarios/`` or a
   user's own file; ``drivers``: its ``driver`` field's types (the robot's LCM
   channels, URL, timeouts and workspace among them); ``make``: the factory;
-- ``recording``: ``StationRecorder``, the one loop that advances and samples a
-  station, and the errors that end a run early;
+- ``recording``: ``advance_station``, how every run advances a station, and
+  the errors that end a run early;
 - ``controller``, ``limits``, ``reflex``: the end-effector controller, the
   Panda's limits and the collision reflex;
 - ``camera``: the object camera's crop; ``models``: where the model files live;
 - ``success``: the ground-truth success judges;
 - ``scripted``, ``pose_source``: keyframed hand motions and the source that plays them;
-- ``records``: Drake loggers of what a run records.
+- ``loggers``: ``StationLoggers``, the one recording path: Drake loggers (and a
+  frame log of the segmenter's outputs) of what a run records, in the Context.
 """

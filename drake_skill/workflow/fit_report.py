@@ -33,7 +33,7 @@ finding (``warning: DEMO: what, when; how to fix``). Per demonstration:
   goal model's most likely state over time (smoothed posterior);
 - how far the executed imitation is from the demonstration [mm RMS], before and
   after refinement (``skill.info["dmp_refinement"]``);
-- the peak filtered contact force and when (the recorder's, ``demos/force_margin``).
+- the peak filtered contact force and when (the recording's, ``demos/force_margin``).
 
 The re-posed scene is the simulation's: a schema-1 demonstration recorded on the
 robot (``metadata["source"]`` "kinesthetic") is reported without the segment

@@ -42,7 +42,7 @@ Safety lives here, not in the caller's hands:
   kReflex), which stops the station; and :meth:`HardwareStation.robot_scene_contact`
   gives the measured external joint torques (the driver's
   ``joint_torque_external``) to the same check that decides the reflex in
-  simulation (the recorder's monitor in ``drake_skill.station.recording``,
+  simulation (the reflex monitor, ``drake_skill.station.reflex``,
   on the scenario's ``reflex`` limits).
 
 The station's simulator must run in real time (``realtime`` is True; the

@@ -8,8 +8,11 @@ Simulator and one Context that every run reuses:
     X_WO = sim.reset(seed=3)            # defaults + object pose drawn from the seed
     log = sim.run(plan, duration=8.0)   # records the hand pose and object state
 
-Runs are recorded by :class:`~drake_skill.station.recording.StationRecorder`, the
-loop every station shares; they end early with its exceptions.
+Runs are recorded by the diagram's loggers
+(:class:`~drake_skill.station.loggers.StationLoggers`, the one recording path:
+the gripper command and, with perception, the segmenter's frames included);
+:meth:`StationSimulation.record` starts them, advances once and reads them.
+Runs end early with ``drake_skill.station.recording``'s exceptions.
 
 The same seed gives bit-identical trajectories (the plant is discrete, the
 controllers are discrete, and the randomisation reads only the seed).
@@ -23,7 +26,8 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_skill.station.scenario import Scenario
 from drake_skill.station.pose_source import PosePlan, PoseTrajectorySource, hold_plan
-from drake_skill.station.recording import RunLog, StationRecorder
+from drake_skill.station.loggers import StationLoggers, StationRecords
+from drake_skill.station.recording import RunLog, advance_station
 from drake_skill.station.make import make_station
 from drake_skill.station.sim.builder import Station
 from drake_skill.station.success import judge_run, judge_success
@@ -33,10 +37,12 @@ class StationSimulation:
     """One station diagram, one simulator, reused for every run.
 
     perceive: wire an ``ObjectSegmenter`` to the camera (``self.segmenter``),
-    for recordings with perception (needs ``config.enable_camera``).
+    for recordings with perception (needs ``config.enable_camera``): the loggers
+    (``self.loggers``) then log its frames. record_hz: the loggers' default grid [Hz].
     """
 
-    def __init__(self, config: Scenario | None = None, meshcat=None, perceive: bool = False):
+    def __init__(self, config: Scenario | None = None, meshcat=None, perceive: bool = False,
+                 record_hz: float = 100.0):
         builder = DiagramBuilder()
         self.station: Station = builder.AddNamedSystem("station", make_station(config, meshcat=meshcat))
         self.config = self.station.config
@@ -51,6 +57,8 @@ class StationSimulation:
                 raise ValueError("perceive=True needs a station with enable_camera = true")
             from drake_skill.perception.systems import add_object_segmenter
             self.segmenter = add_object_segmenter(builder, self.station)
+        self.loggers = StationLoggers(builder, self.station, record_hz, segmenter=self.segmenter,
+                                      gripper_command=self.source.GetOutputPort("gripper_command"))
         self.diagram = builder.Build()
         self.context = self.diagram.CreateDefaultContext()
         self.simulator = Simulator(self.diagram, self.context)
@@ -96,24 +104,28 @@ class StationSimulation:
     def ee_pose(self) -> RigidTransform:
         return self.station.GetOutputPort("ee_pose").Eval(self.station_context())
 
-    def recorder(self, record_hz: float = 100.0, frame_hz: float | None = None) -> StationRecorder:
-        """A recorder of this simulation (with the segmenter when built with perceive=True
-        and ``frame_hz`` is given)."""
-        segmenter = self.segmenter if frame_hz is not None else None
-        return StationRecorder(self.station, self.context, self.simulator, record_hz, frame_hz, segmenter)
+    def record(self, n: int, record_hz: float | None = None, frames: bool = True) -> StationRecords:
+        """Plays the current plan for n periods of 1 / record_hz (default the loggers') from
+        now, recording the n + 1 samples (with ``frames``, the camera frames too when built
+        with perceive=True: now must then be a camera frame instant). Raises
+        DivergedError, ReflexError or SolverError (see the module docstring)."""
+        hz = self.loggers.record_hz if record_hz is None else float(record_hz)
+        t0 = self.loggers.start(self.context)
+        advance_station(self.simulator, self.station, self.context, self.loggers.grid(n, t0, hz, frames)[-1])
+        records = self.loggers.read(self.context, n, t0, hz, frames)
+        records.check_joint_states()
+        return records
 
     def run(self, plan: PosePlan | None, duration: float, record_hz: float = 100.0) -> RunLog:
         """Plays ``plan`` (None: keep the current one) for ``duration`` s from the
-        current time, recording at ``record_hz``; raises DivergedError,
+        current time, recording at ``record_hz`` (:meth:`record`); raises DivergedError,
         ReflexError or SolverError (see the module docstring)."""
         if plan is not None:
             self.set_plan(plan)
         if duration <= 0:
             raise ValueError(f"duration must be positive, got {duration}")
-        recorder = self.recorder(record_hz)
-        recorder.anchor()
-        recorder.record(int(round(duration * record_hz)))
-        return recorder.run_log(self._X_WO)
+        r = self.record(int(round(duration * record_hz)), record_hz, frames=False)
+        return RunLog(r.times, r.ee_pose, r.state[:, :7], r.object_state, r.contact_force, self._X_WO)
 
     def judge(self, object_state: float | None = None) -> bool:
         """Ground-truth verdict of the scenario's success rule (its skill's) on the
