@@ -56,7 +56,7 @@ def test_a_joint_torque_over_its_limit_names_the_joint_and_a_force_under_it_runs
 def test_a_disabled_reflex_filters_and_keeps_the_peak_but_never_stops():
     status, monitor, context = _simulate(100.0, np.full(7, 100.0), enabled=False)
     assert status.reason() == SimulatorStatus.ReturnReason.kReachedBoundaryTime
-    assert monitor.take_peak(context) == pytest.approx(100.0, rel=1e-6)
+    assert monitor.GetOutputPort("filtered").Eval(context)[9] == pytest.approx(100.0, rel=1e-6)
 
 
 def test_the_filter_is_first_order_in_the_time_since_its_last_update():
@@ -128,22 +128,19 @@ def test_trip_thresholds_are_strict_and_name_the_first_joint_over():
     assert trip is None and x[0] == 40.0 and x[-1] == 40.0
 
 
-def test_monitor_checks_its_torque_limits_and_takes_peaks():
+def test_monitor_checks_its_torque_limits_and_keeps_its_state_in_the_context():
     with pytest.raises(ValueError) as e:
         ReflexMonitor(ReflexConfig(external_torque_max=[30.0] * 6), 0.002)
     assert str(e.value) == "reflex.external_torque_max: expected 7 values, got 6"
     tau = np.r_[-20.0, np.zeros(6)]
     status, monitor, context = _simulate(10.0, tau, enabled=False, until=0.3)
-    np.testing.assert_allclose(monitor.take_torque_peak(context), np.r_[20.0, np.zeros(6)], rtol=1e-9)
-    # The next interval starts at |tau_hat| (not at 0, nor at the signed value).
-    np.testing.assert_allclose(monitor.take_torque_peak(context), np.r_[20.0, np.zeros(6)], rtol=1e-9)
-    assert monitor.take_peak(context) == pytest.approx(10.0, rel=1e-9)
     x = monitor.GetOutputPort("filtered").Eval(context)
     assert x[8] == pytest.approx(0.298, abs=1e-12) and x[9] == x[0]      # the last update's time; peak = f_hat
-    assert x[1] == pytest.approx(-20.0, rel=1e-9)
+    assert x[0] == pytest.approx(10.0, rel=1e-9) and x[1] == pytest.approx(-20.0, rel=1e-9)
+    # One discrete group, the output's [10]: no other per-run value (a peak taken by changing the state).
+    assert context.num_discrete_state_groups() == 1
     monitor.start(context)
     np.testing.assert_array_equal(monitor.GetOutputPort("filtered").Eval(context), np.r_[np.zeros(8), 0.3, 0.0])
-    np.testing.assert_array_equal(monitor.take_torque_peak(context), np.zeros(7))
     assert monitor.trip(context) is None
 
 

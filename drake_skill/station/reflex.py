@@ -15,14 +15,16 @@ external joint torques tau [N m]; the reflex trips when f_hat >
 ``contact_force_max`` or any |tau_hat_i| > ``external_torque_max[i]``.
 
 Every value of a run lives in the Context: the thresholds in a numeric
-parameter, the filter, the time of its last update and the peaks of f_hat
-and of each |tau_hat_i| since the recorder last took them in discrete state
-(the recorder's per-sample peaks: ``drake_skill.demos.force_margin`` compares
-a demonstration's with the thresholds). The update runs every
+parameter, the filter, the time of its last update and the peak of f_hat
+since the run's start in discrete state, exported as the station's
+``reflex_state``. Nothing reads the monitor by changing it: a recording's
+per-sample peaks of f_hat and of each |tau_hat_i| are computed from the
+logged state (``drake_skill.station.loggers``; ``drake_skill.demos.force_margin``
+compares a demonstration's with the thresholds). The update runs every
 ``period`` s (the plant's step in simulation: the contact results change
 only then) and, when the reflex trips, returns a termination status: the
 simulator's ``AdvanceTo`` returns at that instant and
-``drake_skill.station.recording.StationRecorder`` raises
+``drake_skill.station.recording.advance_station`` raises
 :class:`~drake_skill.station.recording.ReflexError` from the state.
 """
 
@@ -88,18 +90,12 @@ def _filter_step(x: list, force: float, tau: list, now: float, params: list):
     return x_next, None
 
 
-def _elementwise_max(a: list, b: list) -> list:
-    """``np.maximum(a, b)`` on Python floats (NaN where either is NaN)."""
-    return [p if (p >= q or p != p) else q for p, q in zip(a, b)]
-
-
 class ReflexMonitor(LeafSystem):
     """Inputs ``contact_force`` [1] (robot-scene contact force [N]) and ``external_torque``
     [7] [N m]; output ``filtered`` [10]: the state [f_hat, tau_hat (7), time of the last
-    update [s], peak f_hat] (a state output port: no Python per evaluation). The module
-    docstring gives the filter (:meth:`take_peak` and :meth:`take_torque_peak` give the
-    peaks of f_hat and of each |tau_hat_i| since their last call); ``reflex`` is the scenario's ``ReflexConfig`` (the
-    parameter's defaults), ``period`` the update's [s].
+    update [s], peak f_hat since the run's start] (a state output port: no Python per
+    evaluation). The module docstring gives the filter; ``reflex`` is the scenario's
+    ``ReflexConfig`` (the parameter's defaults), ``period`` the update's [s].
     """
 
     def __init__(self, reflex, period: float):
@@ -112,9 +108,6 @@ class ReflexMonitor(LeafSystem):
         self._force = self.DeclareVectorInputPort("contact_force", 1)
         self._tau = self.DeclareVectorInputPort("external_torque", N_JOINTS)
         self._state = self.DeclareDiscreteState(_STATE_SIZE)
-        # Peak |tau_hat_i| [N m] since take_torque_peak: a group of its own, so that the
-        # ``filtered`` output (the station's ``reflex_state``) keeps its layout.
-        self._tau_peak = self.DeclareDiscreteState(N_JOINTS)
         self.DeclarePeriodicDiscreteUpdateEvent(float(period), 0.0, self._update)
         self.DeclareStateOutputPort("filtered", self._state)
 
@@ -123,23 +116,6 @@ class ReflexMonitor(LeafSystem):
         x = np.zeros(_STATE_SIZE)
         x[_T] = context.get_time()
         context.get_mutable_discrete_state(self._state).SetFromVector(x)
-        context.get_mutable_discrete_state(self._tau_peak).SetFromVector(np.zeros(N_JOINTS))
-
-    def take_peak(self, context) -> float:
-        """The peak of f_hat since the last call [N]; starts the next interval at f_hat."""
-        state = context.get_mutable_discrete_state(self._state)
-        x = state.get_value()
-        peak = float(x[_PEAK])
-        state.SetAtIndex(_PEAK, float(x[_F]))
-        return peak
-
-    def take_torque_peak(self, context) -> np.ndarray:
-        """The peak of each |tau_hat_i| since the last call (7) [N m]; starts the next
-        interval at |tau_hat|."""
-        peak = context.get_discrete_state(self._tau_peak).get_value().copy()
-        tau = context.get_discrete_state(self._state).get_value()[_TAU]
-        context.get_mutable_discrete_state(self._tau_peak).SetFromVector(np.abs(tau))
-        return peak
 
     def stop_error(self, context):
         """The trip the state shows as the typed error (``station.recording.ReflexError``), or None."""
@@ -162,8 +138,6 @@ class ReflexMonitor(LeafSystem):
         x_next, trip = _filter_step(x, float(self._force.Eval(context)[0]), self._tau.Eval(context).tolist(),
                                     context.get_time(), params)
         discrete_state.set_value(self._state, x_next)
-        tau_peak = context.get_discrete_state(self._tau_peak).get_value().tolist()
-        discrete_state.set_value(self._tau_peak, _elementwise_max(tau_peak, [abs(t) for t in x_next[_TAU]]))
         if trip is not None:
             return EventStatus.ReachedTermination(self, f"collision reflex ({trip.cause})")
         return EventStatus.Succeeded()
