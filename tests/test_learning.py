@@ -84,10 +84,10 @@ def test_resume_after_an_interruption_reproduces_the_uninterrupted_run(tmp_path_
     whole = learn(shared["skill_dir"], tmp_path / "whole", config, on_episode=rows.append, **kwargs)
     assert whole.complete and whole.search.episode == 2
     # on_episode got each greedy-evaluated episode's row, progress.csv holds the same rows, and
-    # both are the curve's numbers (seed 3: the greedy execution succeeds only before learning).
+    # both are the curve's numbers (seed 3: the greedy execution succeeds only after the second update).
     assert rows == read_progress(tmp_path / "whole" / "progress.csv")
     assert [r["episode"] for r in rows] == [0, 1, 2] and [r["rollouts_used"] for r in rows] == [0, 2, 4]
-    assert [r["greedy_success"] for r in rows] == [1, 0, 0]
+    assert [r["greedy_success"] for r in rows] == [0, 0, 1]
     for row, c in zip(rows, whole.summary["curve"], strict=True):
         for column in ("greedy_return", "mean_return", "best_return", "exploration"):
             assert row[column] == c[column]
@@ -148,13 +148,13 @@ def test_resume_after_an_interruption_reproduces_the_uninterrupted_run(tmp_path_
     kinds = [r["type"] for r in lines["whole"]]
     assert kinds.count("rollout") == 4 and kinds.count("greedy") == 3 and kinds.count("held_out") == 2
     assert resumed.summary["curve"] == whole.summary["curve"]
-    # The guarded selection (docs/method.md 5.1) ran the start, the best greedy mean (update 1: the
-    # highest greedy return, 150.7) and the last on one shared pose (select_poses=1) and kept the last:
-    # every verdict a success, and the highest learned return.
+    # The guarded selection (docs/method.md 5.1) ran the start and the last, which is also the best
+    # greedy mean (update 2: the highest greedy return, 139.4), on one shared pose (select_poses=1) and
+    # kept the last: every verdict a success, and the higher learned return.
     select = [r for r in lines["whole"] if r["type"] == "select"]
     assert len(select) == 1 and select[0]["episode"] == 2 == whole.summary["selected_episode"]
     scores = [(c["episode"], c["verdict_successes"], round(c["mean_return"], 1)) for c in select[0]["candidates"]]
-    assert scores == [(0, 1, 156.3), (1, 1, 161.5), (2, 1, 162.0)]
+    assert scores == [(0, 1, 130.5), (2, 1, 134.7)]
     assert len({tuple(e["seed"] for e in c["executions"]) for c in select[0]["candidates"]}) == 1
     # The learned skill holds the selected mean and loads back.
     learned = Skill.load(tmp_path / "part" / "skill")
