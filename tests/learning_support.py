@@ -48,7 +48,7 @@ def shared_skill(tmp_path_factory) -> dict:
         if not (root / "skill" / "skill.json").is_file():
             from drake_skill.demos.demonstrator import DemonstratorConfig, ScriptedDemonstrator
             from drake_skill.demos.format import demo_path, save_demonstration
-            from drake_skill.skill import default_skill_config, fit_skill
+            from drake_skill.fitted_skill import default_skill_config, fit_skill
 
             demos = ScriptedDemonstrator("close", DemonstratorConfig(pause_probability=0.0, settle_time=0.3),
                                          station_config=small_station("close")).record_many(progress=False)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from drake_skill import fileio
-from drake_skill.skill import Skill
+from drake_skill.fitted_skill import Skill
 
 from test_bad_input import synthetic_skill
 

@@ -14,7 +14,7 @@ from drake_skill.perception.features import GoalFeatures
 from drake_skill.perception.pcae import default_weights
 from drake_skill.reward.goal_model import GoalModelConfig
 from drake_skill.reward.pomrp import PomrpConfig, fit_pomrp
-from drake_skill.skill import Skill, SkillConfig
+from drake_skill.fitted_skill import Skill, SkillConfig
 
 
 # ----------------------------------------------------------------- a small skill
@@ -230,7 +230,7 @@ def test_version_2_skill_encodes_world_frame_clouds(saved_skill, tmp_path):
 def test_gripper_opening_is_the_demonstrations_median():
     from types import SimpleNamespace
 
-    from drake_skill.skill import gripper_opening
+    from drake_skill.fitted_skill import gripper_opening
 
     demos = [SimpleNamespace(gripper_100hz=np.r_[0.0, np.full(9, w)]) for w in (0.08, 0.07, 0.078)]
     assert gripper_opening(demos) == pytest.approx(0.078)

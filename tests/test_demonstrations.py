@@ -307,7 +307,7 @@ def test_quaternion_sign_of_x_oe_may_differ_from_the_raw_pose():
 
 
 def test_demonstrations_too_short_for_the_goal_model_name_the_file(tmp_path):
-    from drake_skill.skill import SkillConfig, fit_skill
+    from drake_skill.fitted_skill import SkillConfig, fit_skill
 
     demos = [make_demo(0), make_demo(1)]
     for i, d in enumerate(demos):

@@ -95,7 +95,7 @@ def test_n_basis_is_the_fewest_on_the_ladder_that_meet_the_tolerance():
 def test_no_basis_count_meets_the_tolerance_of_a_short_jerky_demonstration():
     """The cap (samples of the shortest demonstration) reached: the best B is returned with met = False,
     and fit_skill turns that into a one-line error naming the demonstration and the best error."""
-    from drake_skill.skill import SkillConfig, _fit_action
+    from drake_skill.fitted_skill import SkillConfig, _fit_action
     from drake_skill.skills import load_skill
 
     t = np.arange(12) / 100.0
@@ -192,7 +192,7 @@ def test_refinement_that_diverges_keeps_the_plain_fit():
 
 def test_a_demonstration_that_never_moves_the_object_is_warned_about():
     """Bad input: a demonstration whose object never moves cannot have touched it; fit says which."""
-    from drake_skill.skill import Skill, SkillConfig, _fit_action
+    from drake_skill.fitted_skill import Skill, SkillConfig, _fit_action
     from drake_skill.skills import load_skill
 
     t, p = ramp_path(duration=3.0)
@@ -211,7 +211,7 @@ def test_a_demonstration_that_never_moves_the_object_is_warned_about():
 
 
 def test_a_demonstration_without_its_100hz_data_names_itself_and_the_fix():
-    from drake_skill.skill import SkillConfig, _fit_action
+    from drake_skill.fitted_skill import SkillConfig, _fit_action
 
     t, p = ramp_path(duration=2.0)
     demos = [SimpleNamespace(times_100hz=t, X_OE_100hz=p, object_state_100hz=np.zeros_like(t), path="demo_000.npz"),

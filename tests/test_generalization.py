@@ -108,7 +108,7 @@ def test_fit_refuses_demonstrations_that_never_meet_the_skills_rule(tmp_path_fac
 def test_a_demonstration_ending_at_exactly_zero_is_judged_not_skipped():
     from types import SimpleNamespace
 
-    from drake_skill.skill import check_demonstrations_meet_rule
+    from drake_skill.fitted_skill import check_demonstrations_meet_rule
     from drake_skill.station.scenario import SuccessConfig
 
     spec = SimpleNamespace(name="lift", success=SuccessConfig(joint="j", above=0.5))

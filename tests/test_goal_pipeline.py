@@ -13,7 +13,7 @@ from drake_skill.perception import systems
 from drake_skill.perception.pcae import cloud_in_object_frame
 from drake_skill.perception.segmentation import fit_table_plane, process_frame
 from drake_skill.reward.systems import add_goal_pipeline
-from drake_skill.skill import default_skill_config, fit_skill
+from drake_skill.fitted_skill import default_skill_config, fit_skill
 from drake_skill.station.make import make_station
 from drake_skill.skills import scenario_for_skill
 from drake_skill.station.pose_source import PoseTrajectorySource

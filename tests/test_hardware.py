@@ -176,7 +176,7 @@ def test_a_learning_run_on_the_simulated_robot(tmp_path, tmp_path_factory):
     from learning_support import rollout_config, shared_skill
 
     from drake_skill.learning.loop import LearnConfig, learn
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     shared = shared_skill(tmp_path_factory)
     hardware_config = _hardware_config(copy.deepcopy(shared["station"]))
@@ -220,7 +220,7 @@ def test_refinement_on_the_simulated_robot_brings_its_path_to_the_demonstration(
     from learning_support import shared_skill
 
     from drake_skill.learning.refine import refine_on_robot
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     shared = shared_skill(tmp_path_factory)
     station_config = copy.deepcopy(shared["station"])
@@ -275,7 +275,7 @@ def test_hardware_refine_refuses_a_thesis_fit_and_its_own_folder(tmp_path_factor
 
     from drake_skill.cli.main import main
     from drake_skill.learning.refine import refine_on_robot
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     shared = shared_skill(tmp_path_factory)
     with pytest.raises(ValueError, match="10 Hz data .* --fit tolerance"):

@@ -185,7 +185,7 @@ LAYERS = (
     ("perception",),              # segmenter, PCAE, features (math | systems)
     ("reward", "station"),        # goal model and POMRP; the station (sim and hardware)
     ("skills",),                  # skill files and scenarios as data
-    ("inputs", "demos", "skill"),  # input checks; demonstrations; a fitted skill
+    ("inputs", "demos", "fitted_skill"),  # input checks; demonstrations; a fitted skill
     ("learning",),                # rollouts, policy search, the learning run, evaluation
     ("workflow", "bench"),        # the commands' workflows; benchmarks
     ("experiments",),             # the chapter-7 grid

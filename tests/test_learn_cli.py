@@ -17,7 +17,7 @@ from drake_skill.learning.loop import ARTIFACTS
 from drake_skill.learning.plots import plot_outcomes_by_placement
 from drake_skill.learning.runlog import VERSIONED_PACKAGES, read_progress
 from drake_skill.skills import load_skill
-from drake_skill.skill import Skill
+from drake_skill.fitted_skill import Skill
 from drake_skill.station.sim.builder import Station
 from pydrake.math import RollPitchYaw
 

@@ -13,7 +13,7 @@ import pytest
 from drake_skill.learning.loop import LearnConfig, episode_rewards, learn, pose_seed
 from drake_skill.learning.runlog import PROGRESS_COLUMNS, RunLog, _git_commit, progress_row, read_progress
 from drake_skill.skills import load_skill
-from drake_skill.skill import Skill
+from drake_skill.fitted_skill import Skill
 
 from learning_support import rollout_config, shared_skill
 

@@ -256,7 +256,7 @@ def test_exploratory_rollouts_end_without_solver_failure():
     from drake_skill.action.dmp import fit_demonstrations
     from drake_skill.demos.demonstrator import DemonstratorConfig, ScriptedDemonstrator
     from drake_skill.learning.rollout import ActionModel, RolloutConfig, RolloutRunner
-    from drake_skill.skill import default_skill_config
+    from drake_skill.fitted_skill import default_skill_config
 
     config = _config("close")
     demos = ScriptedDemonstrator("close", DemonstratorConfig(record_perception=False), config).record_many(

@@ -9,7 +9,7 @@ from drake_skill.action.dmp import DmpConfig, fit_dmp
 from drake_skill.action.quaternion import make_quaternions_continuous
 from drake_skill.demos.format import downsample_action
 from drake_skill.learning.rollout import FAILURE_REASONS, ActionModel, RolloutConfig, RolloutRunner, classify_failure
-from drake_skill.skill import Skill
+from drake_skill.fitted_skill import Skill
 from drake_skill.skills import scenario_for_skill
 from drake_skill.demos.scripted import scripted_plan
 from drake_skill.station.recording import DivergedError, ReflexError, SolverError, pose_to_vector

@@ -5,7 +5,7 @@ import pytest
 
 from drake_skill.demos.demonstrator import DemonstratorConfig, ScriptedDemonstrator
 from drake_skill.station.pose_source import hold_plan
-from drake_skill.skill import Skill, default_skill_config, fit_skill, hold_invalid
+from drake_skill.fitted_skill import Skill, default_skill_config, fit_skill, hold_invalid
 
 
 def _parked_goal_clouds(demonstrator, seed, duration=6.0):

@@ -44,7 +44,7 @@ def test_the_shipped_skills_are_data_files():
     opened, closed, drawn = load_skill("open"), load_skill("close"), load_skill("draw")
     # Thesis 6.2 and Table 6.1; docs/method.md section 5 for the exploration scales.
     # dmp_bases left out: fit chooses B from the tolerance (docs/method.md 2.2); the thesis's
-    # Table 6.1 values live with its reproduction (drake_skill.skill.THESIS_DMP_BASES).
+    # Table 6.1 values live with its reproduction (drake_skill.fitted_skill.THESIS_DMP_BASES).
     assert [(s.demonstrations, s.dmp_bases, s.exploration_scale) for s in (opened, closed, drawn)] == [
         (3, None, 0.1), (2, None, 1.0), (2, None, 0.1)]
     assert [s.scenario_path().name for s in (opened, closed, drawn)] == ["box_closed.yaml", "box_open.yaml",

@@ -13,7 +13,7 @@ import pytest
 
 from drake_skill.cli.main import main
 from drake_skill.demos.format import load_demonstrations
-from drake_skill.skill import Skill
+from drake_skill.fitted_skill import Skill
 from drake_skill.station.scenario import ROBOT_DIRECTIVES
 
 #: A red tray (16 x 24 x 9 cm) whose 1.2 cm top plate slides along +y up to 15 cm,

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from drake_skill.learning.workers import ProcessPool, RunnerSpec, SerialPool, make_pool, ray_available
-from drake_skill.skill import Skill
+from drake_skill.fitted_skill import Skill
 
 from learning_support import rollout_config, shared_skill
 from ray_cluster_support import local_ray_map, netns_unavailable

@@ -36,7 +36,7 @@ AFTER_MIN = 0.8
 
 def initial_skill(skill: str, out: Path, quiet: bool) -> Path:
     from drake_skill.demos.demonstrator import ScriptedDemonstrator
-    from drake_skill.skill import default_skill_config, fit_skill
+    from drake_skill.fitted_skill import default_skill_config, fit_skill
 
     directory = out / skill / "initial_skill"
     if not (directory / "skill.json").is_file():
@@ -47,7 +47,7 @@ def initial_skill(skill: str, out: Path, quiet: bool) -> Path:
 
 def one_run(skill_dir: Path, out: Path, seed: int, args, log) -> dict:
     from drake_skill.learning.loop import LearnConfig, learn
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
     from drake_skill.station.scenario import load_scenario
     from drake_skill.skills import scenario_for_skill
 

@@ -18,7 +18,7 @@ def render(skill_dir: Path, depth: int) -> bytes:
     import pydot
 
     from drake_skill.learning.rollout import RolloutRunner
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     runner = RolloutRunner(Skill.load(skill_dir))
     (graph,) = pydot.graph_from_dot_data(runner.diagram.GetGraphvizString(max_depth=depth))

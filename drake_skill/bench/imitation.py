@@ -2,7 +2,7 @@
 
 ``drake-skill bench imitation [--json]`` / ``python tools/bench_imitation.py [--json]``.
 
-For each demonstration of a skill, its DMP (``drake_skill.skill.fit_skill``
+For each demonstration of a skill, its DMP (``drake_skill.fitted_skill.fit_skill``
 with the skill file's defaults and, as ``drake-skill fit`` does, the
 refinement on the simulated station unless --no-refine; or a fitted
 skill's) is integrated alone and
@@ -182,7 +182,7 @@ def _refined(skill, i: int):
 def _fit(spec, demos, quiet: bool, refine: bool = True):
     """``fit_skill`` with the skill file's defaults, then, as ``drake-skill fit`` does, the refinement
     on the simulated station when the config asks for it (``SkillConfig.dmp_refine``) and ``refine``."""
-    from drake_skill.skill import default_skill_config, fit_skill
+    from drake_skill.fitted_skill import default_skill_config, fit_skill
 
     _progress(f"{spec.name}: fitting {len(demos)} demonstrations ...", quiet)
     skill = fit_skill(demos, default_skill_config(spec))
@@ -203,7 +203,7 @@ def run(args) -> dict:
     if args.count and args.count < 2:
         raise ValueError(f"--count {args.count}: a skill is fitted from at least 2 demonstrations")
     if args.skill_dir is not None:
-        from drake_skill.skill import Skill
+        from drake_skill.fitted_skill import Skill
 
         errors.input_folder(args.skill_dir, "--skill-dir", "a fitted skill (drake-skill fit)")
         skill = Skill.load(args.skill_dir)

@@ -42,7 +42,7 @@ def fitted_skill_dir(skill: str, cache: Path, progress: bool = False) -> Path:
     if (directory / "skill.json").is_file():
         return directory
     from drake_skill.demos.demonstrator import ScriptedDemonstrator
-    from drake_skill.skill import default_skill_config, fit_skill
+    from drake_skill.fitted_skill import default_skill_config, fit_skill
 
     demos = ScriptedDemonstrator(skill).record_many(progress=progress)
     fit_skill(demos, default_skill_config(skill)).save(directory, overwrite=True)

@@ -121,7 +121,7 @@ def measure(skill_dir: Path, *, rollouts: int = 30, demo_poses: int = 2, seed0: 
     from drake_skill.learning.config import HELD_OUT_SEED0
     from drake_skill.learning.evaluation import evaluate_skill, explore_skill
     from drake_skill.learning.reward_quality import records_from_report, reward_quality
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     seed0 = HELD_OUT_SEED0 if seed0 is None else int(seed0)
     skill = Skill.load(skill_dir)

@@ -4,7 +4,7 @@
 
 One process. A skill is fitted first (scripted demonstrations,
 ``drake_skill.demos.demonstrator.ScriptedDemonstrator`` with a fixed seed, then
-``drake_skill.skill.fit_skill``) and cached under ``--cache`` (default
+``drake_skill.fitted_skill.fit_skill``) and cached under ``--cache`` (default
 ``results/bench_rollout/``), so the benchmark runs on a fresh clone; a second
 run loads it. Then the skill's initial weights are executed from the same
 object pose by the rollout runner policy search uses
@@ -68,7 +68,7 @@ RATIO_TO_BARE_REQUIRED = 2.5
 
 def fitted_skill(skill: str = "open", seed: int = 0, cache: Path = DEFAULT_CACHE, progress: bool = False):
     """The skill fitted from scripted demonstrations (seed ``seed``), cached in ``cache``."""
-    from drake_skill.skill import Skill, default_skill_config, fit_skill
+    from drake_skill.fitted_skill import Skill, default_skill_config, fit_skill
 
     directory = Path(cache) / f"skill_{skill}_seed{seed}"
     if (directory / "skill.json").is_file():

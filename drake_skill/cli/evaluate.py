@@ -85,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
     from drake_skill.fileio import atomic_write_json
     from drake_skill.learning.evaluation import evaluate_skill, evaluation_table
     from drake_skill.learning.plots import plot_outcomes_by_placement
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
     from drake_skill.inputs import scenario
 
     if args.poses < 1:

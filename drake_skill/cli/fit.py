@@ -3,7 +3,7 @@
     drake-skill fit --demos DIR --out SKILL_DIR [--config skill.yaml] [--seed N] [--force]
 
 Loads every ``demo_*.npz`` of DIR (see ``drake-skill demos record``), fits the
-skill (``drake_skill.skill.fit_skill``: per-demonstration DMPs and Sigma_0,
+skill (``drake_skill.fitted_skill.fit_skill``: per-demonstration DMPs and Sigma_0,
 PCAE codes -> PCA goal data, goal HMM by AIC, MRP values, POMRP reward),
 prints the goal model's summary, and writes SKILL_DIR:
 
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     from drake_skill.demos.format import load_demonstrations
     from drake_skill.reward.plots import plot_goal_model, plot_return
     from drake_skill.learning.evaluation import save_fitted_skill
-    from drake_skill.skill import SkillConfig, _pcae_path, default_skill_config, fit_skill
+    from drake_skill.fitted_skill import SkillConfig, _pcae_path, default_skill_config, fit_skill
 
     if args.config:  # parse errors and unknown keys before reading the demonstrations
         errors.load_yaml(SkillConfig, args.config, "--config").dmp.validate()

@@ -126,7 +126,7 @@ def _run(args) -> int:
     from drake_skill.cli.sim_robot import load_config
     from drake_skill.fileio import atomic_write_json
     from drake_skill.learning.rollout import RolloutRunner
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
     from drake_skill.station.make import make_station
 
     if args.rollouts < 1:
@@ -275,7 +275,7 @@ def _refine(args) -> int:
     from drake_skill.demos.format import load_demonstrations
     from drake_skill.learning.imitation import check_demo_pairs
     from drake_skill.learning.refine import refine_on_robot, refinement_lines
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
     from drake_skill.station.make import make_station
 
     if args.iterations < 1:

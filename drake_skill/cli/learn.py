@@ -166,7 +166,7 @@ def _print_config(args) -> None:
 
     from drake_skill.cli.learn_config import LearnFile
     from drake_skill.learning.loop import LearnConfig
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     if args.skill is not None:
         spec = errors.skill(args.skill)
@@ -198,7 +198,7 @@ def prepare_skill(args, out: Path) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     from drake_skill.learning.loop import LearnConfig, learn
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     _apply_config_file(args)
     if args.print_config:

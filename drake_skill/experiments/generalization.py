@@ -209,7 +209,7 @@ def write_report(out, rules: dict | None = None) -> list[Path]:
         if rules is not None and skill in rules:
             rule = rules[skill]
         else:
-            from drake_skill.skill import Skill
+            from drake_skill.fitted_skill import Skill
 
             rule = Skill.load(out / skill / "initial_skill").spec.success
         skills[skill] = _skill_figures(out, skill, skill_runs, rule)

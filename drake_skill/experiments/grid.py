@@ -97,7 +97,7 @@ class GridConfig:
       ``held_out_seed0``, as ``drake-skill learn`` and ``evaluate``.
     keep_skills: keep each run's learned ``skill/`` folder (7 MB each; the
       learned weights are in its ``checkpoint/search.npz`` anyway).
-    fit: how each skill is fitted (``drake_skill.skill.FITS``): "thesis" (the
+    fit: how each skill is fitted (``drake_skill.fitted_skill.FITS``): "thesis" (the
       default: the committed chapter-7 grid's fit, so a resumed grid never
       mixes fits) or "tolerance" (docs/method.md section 2.2). Stored in
       ``grid.json`` when not "thesis" (grids stored before it have none).
@@ -253,7 +253,7 @@ def _held_out(runner, weights, n: int, seed0: int) -> dict | None:
 
 
 def _execute_before(task: GridTask) -> dict:
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     weights = Skill.load(task.spec.skill_dir).initial_weights
     report = _held_out(_runner(task.spec), weights, task.held_out, task.held_out_seed0)
@@ -302,7 +302,7 @@ def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None
     """Each skill's fitted skill ``OUT/SKILL/initial_skill``: recorded and fitted once
     (:func:`drake_skill.workflow.prepare.prepare_skill`, as ``drake-skill learn`` does), or copied
     from ``skill_dir`` (one skill only). ``sources``: {name: shipped name or skill file}."""
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
     from drake_skill.workflow.prepare import prepare_skill
 
     dirs = {}
@@ -330,7 +330,7 @@ def prepare_config(source: str, station_yaml: Path | None = None, quiet: bool = 
 
 def _copy_skill(source: Path, initial: Path, skill: str) -> None:
     """``--skill-dir`` into ``initial`` (once); a different skill already there is an error."""
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     if Skill.load(source).name != skill:
         raise ValueError(f"--skill-dir {source} holds a '{Skill.load(source).name}' skill, not '{skill}'; "

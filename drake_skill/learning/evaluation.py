@@ -98,7 +98,7 @@ def evaluate_skill(skill_dir, *, poses: int = 10, seed0: int = HELD_OUT_SEED0, s
     """
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec, make_pool
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     if int(poses) < 1:
         raise ValueError(f"poses: expected at least 1 held-out pose, got {poses}")
@@ -170,7 +170,7 @@ def choose_initial_dmp(skill_dir, *, poses: int | None = None, station_config=No
     ``seeds``, ``mean_returns``, ``successes`` (ground truth, per DMP),
     ``seeded_index``, ``index``, ``executions``), which is returned.
     """
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     skill = Skill.load(skill_dir)
     poses = int(skill.spec.initial_dmp_poses if poses is None else poses)
@@ -204,7 +204,7 @@ def apply_initial_rule(skill_dir, *, station_config=None, workers: int = 1, prog
     """The skill file's ``initial_dmp`` rule on a freshly fitted skill: with "best-return",
     :func:`choose_initial_dmp` (a line saying what it chose is returned); with "random" the
     fit's seeded pick stands (None)."""
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     if not _chooses_best_return(Skill.load(skill_dir)):
         return None
@@ -218,7 +218,7 @@ def save_fitted_skill(skill, skill_dir, *, overwrite: bool = False, station_conf
     rule (as :func:`apply_initial_rule`, read from ``skill`` in memory; ``log`` gets the line
     saying what it chose). Returns the skill as saved: ``skill`` itself under "random", else the
     rewritten one."""
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     skill.save(skill_dir, overwrite=overwrite)
     if not _chooses_best_return(skill):
@@ -246,7 +246,7 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     from drake_skill.learning.policy_search import make_policy_search
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec, make_pool
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     if int(rollouts) < 1:
         raise ValueError(f"rollouts: expected at least 1 exploratory rollout, got {rollouts}")

@@ -55,7 +55,7 @@ class SpanExploration:
 
     @classmethod
     def of_skill(cls, skill) -> "SpanExploration":
-        """The span of a fitted :class:`~drake_skill.skill.Skill`'s DMPs through its initial one."""
+        """The span of a fitted :class:`~drake_skill.fitted_skill.Skill`'s DMPs through its initial one."""
         others = [d.weights for i, d in enumerate(skill.dmps) if i != skill.initial_index]
         return cls(skill.initial_weights, others)
 

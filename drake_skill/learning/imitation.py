@@ -161,7 +161,7 @@ class Imitator:
     """Executes DMPs of one skill on demonstrations' object poses; one diagram, built once.
 
     Args:
-        model: a fitted :class:`~drake_skill.skill.Skill` or an
+        model: a fitted :class:`~drake_skill.fitted_skill.Skill` or an
             :class:`~drake_skill.learning.rollout.ActionModel` (its DMP
             hyper-parameters and finger opening are used; every DMP given to
             :meth:`imitate` must have its number of bases).

@@ -203,7 +203,7 @@ class LearningRun:
         from pydrake.common.yaml import yaml_dump_typed
 
         from drake_skill.learning.rollout import RolloutConfig
-        from drake_skill.skill import Skill
+        from drake_skill.fitted_skill import Skill
 
         config = (config or LearnConfig()).validate()
         self.skill_dir, self.out_dir = Path(skill_dir), Path(out_dir)

@@ -85,7 +85,7 @@ def replay_rollout(folder, name: str, index: int, out=None, *, stored: bool = Fa
 
 def _draw_stored(record, setup: dict, out: Path, meshcat) -> Replayed:
     from drake_skill.demos.replay import joints_replay_html
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
     from drake_skill.station.scenario import load_scenario
 
     if "joints" not in record:

@@ -6,7 +6,7 @@ The diagram (docs/architecture.md, "One diagram per skill execution")::
                     gripper_opening (the skill's) --> [Station]
     [Station] --point_cloud--> [ObjectSegmenter] --> [PcaeFeaturizer] --> [PomrpReward]
 
-built by :class:`RolloutRunner` from a fitted :class:`~drake_skill.skill.Skill`
+built by :class:`RolloutRunner` from a fitted :class:`~drake_skill.fitted_skill.Skill`
 (the goal pipeline through :func:`drake_skill.reward.systems.add_goal_pipeline`).
 Each :meth:`RolloutRunner.run` (docs/architecture.md, "The outer loop"):
 
@@ -156,7 +156,7 @@ class RolloutConfig:
 class ActionModel:
     """A skill without a goal model: name, DMP, DMP hyper-parameters, finger opening [m].
 
-    Stands in for a :class:`~drake_skill.skill.Skill` where only the action
+    Stands in for a :class:`~drake_skill.fitted_skill.Skill` where only the action
     model matters (ground-truth success of an imitation, no learned reward).
     """
 
@@ -283,7 +283,7 @@ class RolloutRunner:
     """One diagram (station + object pose + DMP + goal pipeline) reused for every rollout.
 
     Args:
-        skill: a fitted :class:`~drake_skill.skill.Skill` (action and goal
+        skill: a fitted :class:`~drake_skill.fitted_skill.Skill` (action and goal
             model), or an :class:`ActionModel` (no learned reward; then
             ``config.goal_model`` must be off).
         station_config: the scenario (default: the skill's, ``Skill.station_config()``).

@@ -67,7 +67,7 @@ Progress = Callable[[int, RolloutResult], None]
 class RunnerSpec:
     """Plain data a worker builds its :class:`RolloutRunner` from.
 
-    skill_dir: a saved :class:`~drake_skill.skill.Skill`; station_yaml: the
+    skill_dir: a saved :class:`~drake_skill.fitted_skill.Skill`; station_yaml: the
     ``Scenario`` as YAML (``dump_scenario``; the worker loads it with ``load_scenario``); rollout: the
     ``RolloutConfig`` fields; quiet_ik: drop differential IK's warnings in
     the worker after counting them (the main process reports the counts);
@@ -94,7 +94,7 @@ class RunnerSpec:
                    dc.asdict(rollout_config), quiet_ik, None if dmp_index is None else int(dmp_index))
 
     def build(self, meshcat=None) -> RolloutRunner:
-        from drake_skill.skill import Skill
+        from drake_skill.fitted_skill import Skill
         from drake_skill.station.scenario import load_scenario
 
         station_config = load_scenario(data=self.station_yaml)     # the dumped Scenario, checked again

@@ -37,7 +37,7 @@ The perception-to-reward chain of docs/architecture.md, wired behind a station.
               --goal_data, goal_valid--> [PomrpReward] --> reward, return
 
 ``add_goal_pipeline(builder, station, skill)`` adds the three systems of a
-fitted :class:`~drake_skill.skill.Skill` (its PCAE weights, PCA and POMRP) and
+fitted :class:`~drake_skill.fitted_skill.Skill` (its PCAE weights, PCA and POMRP) and
 connects them by their named ports; the segmenter reads the station's
 object camera (the camera cropped to where the object can appear,
 ``drake_skill.station.camera``). Each samples at the camera rate

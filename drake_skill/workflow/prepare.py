@@ -60,7 +60,7 @@ def fit_and_refine_report(skill, demos, station_config=None) -> tuple[list[str],
 
 
 def _given(config: PrepareConfig, spec) -> Path:
-    from drake_skill.skill import Skill
+    from drake_skill.fitted_skill import Skill
 
     skill = Skill.load(config.skill_dir)      # errors name the file
     if spec is not None and spec.name != skill.name:
@@ -101,7 +101,7 @@ def prepare_skill(config: PrepareConfig, out: Path) -> Path:
     ``config.demos`` or from scripted demonstrations recorded into ``OUT/demos`` (a fit already
     there from recorded demonstrations is used again, so a resumed run fits once)."""
     from drake_skill.learning.evaluation import save_fitted_skill
-    from drake_skill.skill import Skill, default_skill_config, fit_skill
+    from drake_skill.fitted_skill import Skill, default_skill_config, fit_skill
     from drake_skill.skills import scenario_for_skill
 
     if config.skill_dir is not None and config.demos is not None:

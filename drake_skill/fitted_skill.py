@@ -357,7 +357,7 @@ class Skill:
             fileio.atomic_write_text(tmp / "skill.yaml", yaml_dump_typed(self.config))
             files = {name: fileio.file_sha256(tmp / name) for name in _SKILL_FILES}
             fileio.atomic_write_json(tmp / "skill.json", {
-                "schema": "drake_skill.skill", "schema_version": SCHEMA_VERSION, "skill": self.name,
+                "schema": "drake_skill.fitted_skill", "schema_version": SCHEMA_VERSION, "skill": self.name,
                 "n_demonstrations": len(self.dmps), "pomrp": pomrp_meta, "info": self.info,
                 "sha256": files, "pcae_sha256": files["pcae.safetensors"]})
         return directory
@@ -398,9 +398,9 @@ class Skill:
         if not isinstance(meta, dict):
             raise ValueError(f"{meta_path}: expected a JSON object")
         version = meta.get("schema_version")
-        if meta.get("schema") != "drake_skill.skill" or version not in _READABLE_VERSIONS:
+        if meta.get("schema") != "drake_skill.fitted_skill" or version not in _READABLE_VERSIONS:
             raise ValueError(f"{meta_path}: schema {meta.get('schema')!r} version {version!r}, expected "
-                             f"drake_skill.skill version {' or '.join(map(str, _READABLE_VERSIONS))}")
+                             f"drake_skill.fitted_skill version {' or '.join(map(str, _READABLE_VERSIONS))}")
         _check_checksums(directory, meta, version)
         config = _load_config(directory / "skill.yaml", version)
         arrays = fileio.load_npz(directory / "arrays.npz")
