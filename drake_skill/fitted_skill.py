@@ -48,6 +48,9 @@ from drake_skill.reward.pomrp import Pomrp, PomrpConfig, fit_pomrp
 from drake_skill.skills import SkillSpec, load_skill
 from drake_skill.station.limits import FINGER_MAX
 
+#: skill.json's format name: the module's name when the format was made (drake_skill/skill.py, renamed
+#: fitted_skill.py), kept so that every saved skill still loads.
+SCHEMA = "drake_skill.skill"
 SCHEMA_VERSION = 5
 
 @dc.dataclass
@@ -357,7 +360,7 @@ class Skill:
             fileio.atomic_write_text(tmp / "skill.yaml", yaml_dump_typed(self.config))
             files = {name: fileio.file_sha256(tmp / name) for name in _SKILL_FILES}
             fileio.atomic_write_json(tmp / "skill.json", {
-                "schema": "drake_skill.fitted_skill", "schema_version": SCHEMA_VERSION, "skill": self.name,
+                "schema": SCHEMA, "schema_version": SCHEMA_VERSION, "skill": self.name,
                 "n_demonstrations": len(self.dmps), "pomrp": pomrp_meta, "info": self.info,
                 "sha256": files, "pcae_sha256": files["pcae.safetensors"]})
         return directory
@@ -398,7 +401,7 @@ class Skill:
         if not isinstance(meta, dict):
             raise ValueError(f"{meta_path}: expected a JSON object")
         version = meta.get("schema_version")
-        if meta.get("schema") != "drake_skill.fitted_skill" or version not in _READABLE_VERSIONS:
+        if meta.get("schema") != SCHEMA or version not in _READABLE_VERSIONS:
             raise ValueError(f"{meta_path}: schema {meta.get('schema')!r} version {version!r}, expected "
                              f"drake_skill.fitted_skill version {' or '.join(map(str, _READABLE_VERSIONS))}")
         _check_checksums(directory, meta, version)

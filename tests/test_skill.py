@@ -94,6 +94,16 @@ def test_skill_round_trips_with_identical_rewards(close_skill, close_data, tmp_p
         close_skill.save(path)
 
 
+def test_a_skill_saved_before_the_module_was_renamed_still_loads():
+    """skill.json names its format "drake_skill.skill" (the module's old name): a committed skill fitted
+    before ``skill.py`` became ``fitted_skill.py`` loads, with its DMPs and goal model."""
+    from pathlib import Path
+
+    folder = Path(__file__).resolve().parent.parent / "docs" / "results" / "generalization" / "open" / "initial_skill"
+    skill = Skill.load(folder)
+    assert skill.name == "open" and len(skill.dmps) == 3 and skill.initial_weights.shape == (100, 7)
+
+
 def test_corrupt_skill_directory_is_refused(close_skill, tmp_path):
     path = close_skill.save(tmp_path / "skill")
     (path / "pcae.safetensors").write_bytes(b"not the weights")

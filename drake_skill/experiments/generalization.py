@@ -194,7 +194,10 @@ def readme_text(summary: dict, rows, exploration: str = "basis") -> str:
 def _exploration(out: Path) -> str:
     """The study's ``exploration`` (grid.json; absent: "basis")."""
     path = out / "grid.json"
-    return str(load_json(path).get("exploration", "basis")) if path.is_file() else "basis"
+    if not path.is_file():
+        return "basis"
+    return str(load_json(path, "restore it from a copy, or rerun the study into another --out")
+               .get("exploration", "basis"))
 
 
 def write_report(out, rules: dict | None = None) -> list[Path]:
