@@ -189,7 +189,7 @@ def _record_demo(args) -> int:
     from drake_skill.station.make import make_station
     from drake_skill.station.pose_source import PoseTrajectorySource, hold_plan
     from drake_skill.station.loggers import StationLoggers
-    from drake_skill.station.recording import advance_station, check_joint_state, vector_to_pose
+    from drake_skill.station.recording import advance_and_check, advance_station, vector_to_pose
 
     if not args.duration > 0:
         raise ValueError(f"--duration must be positive, got {args.duration}")
@@ -232,12 +232,9 @@ def _record_demo(args) -> int:
     k = int(round(RECORD_HZ / frame_hz))
     print(f"recording {args.duration:.0f} s: guide the arm now (Ctrl-C ends early)", flush=True)
     n_end = int(math.ceil(args.duration * frame_hz - 1e-9)) * k
-    state = station.GetOutputPort("panda_state")
 
     def advance(n: int) -> None:    # to sample n, from Python: Ctrl-C lands between samples
-        t = loggers.grid(n, t_start)[-1]
-        advance_station(simulator, station, context, t)
-        check_joint_state(state.Eval(station.GetMyContextFromRoot(context)), t)
+        advance_and_check(simulator, station, context, loggers.grid(n, t_start)[-1])
 
     n = 0
     try:

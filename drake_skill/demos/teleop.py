@@ -419,13 +419,9 @@ class TeleopSession:
 
     def _advance(self, t: float) -> None:
         """To t [s]: the reflex, solver and divergence checks of every run (``station.recording``)."""
-        from drake_skill.station.recording import advance_station, check_joint_state
+        from drake_skill.station.recording import advance_and_check
 
-        advance_station(self.simulator, self.station, self.context, t)
-        check_joint_state(self.station.GetOutputPort("panda_state").Eval(self.station_context()), t)
-
-    def station_context(self):
-        return self.station.GetMyContextFromRoot(self.context)
+        advance_and_check(self.simulator, self.station, self.context, t)
 
     def _wait_for_record(self, user) -> None:
         """Idle until Record, advancing every ``period`` s (the checks of :meth:`_advance`;

@@ -271,7 +271,7 @@ class Imitator:
         """
         from drake_skill.common import IkWarningCounter
         from drake_skill.learning.rollout import classify_failure
-        from drake_skill.station.recording import advance_station, check_joint_state, pose_to_vector
+        from drake_skill.station.recording import advance_station, pose_to_vector
         from drake_skill.station.success import judge_run
 
         runner = self.runner
@@ -301,8 +301,7 @@ class Imitator:
             logger.removeFilter(counter)
         records = runner.loggers.read(runner.context, n)
         try:
-            for t, state in zip(records.times, records.state):
-                check_joint_state(state, t)
+            records.check_joint_states()
         except Exception as error:
             failure = failure or error
         X_WO_vec = pose_to_vector(X_WO)

@@ -62,7 +62,7 @@ from drake_skill.station.sim.builder import Station
 from drake_skill.station.scenario import Scenario
 from drake_skill.station.frames import add_camera_frames
 from drake_skill.station.loggers import StationLoggers
-from drake_skill.station.recording import advance_station, check_joint_state, pose_to_vector, vector_to_pose
+from drake_skill.station.recording import advance_station, pose_to_vector, vector_to_pose
 from drake_skill.station.success import judge_run
 
 __all__ = ["FAILURE_REASONS", "ActionModel", "ObjectPoseSource", "RolloutConfig", "RolloutResult",
@@ -503,8 +503,7 @@ class RolloutRunner:
         # One advance over the whole rollout; the loggers in the diagram record it.
         advance_station(self.simulator, self.station, self.context, self._samples() / self.rollout_config.record_hz)
         records = self._records()
-        for t, state in zip(records.times, records.state):
-            check_joint_state(state, t)
+        records.check_joint_states()
         times, poses, objs = records.times, records.ee_pose, records.object_state
         final = float(objs[-1])
         success = judge_run(times, objs, records.contact_force, self.config.success)

@@ -5,7 +5,8 @@
 it turns a monitor's termination into the station's typed error. What a run
 records is logged in the diagram (``drake_skill.station.loggers``, the one
 recording path); :class:`RunLog` is a plain run's record, and
-:func:`check_joint_state` the divergence test applied to every sample.
+:func:`check_joint_state` the divergence test applied to every sample
+(:func:`advance_and_check`: both, for a loop that advances step by step).
 
 A run ends early with an exception (all ``RuntimeError``): :class:`ReflexError`
 (the collision reflex: robot-scene contact force or external joint torque
@@ -123,6 +124,14 @@ def advance_station(simulator, station, root_context, t: float) -> None:
             raise RuntimeError(f"the simulation ended at t = {status.return_time():.3f} s: "
                                f"{status.FormatMessage()}")
         raise error
+
+
+def advance_and_check(simulator, station, root_context, t: float) -> None:
+    """One step of an interactive loop (teleoperation, a kinesthetic recording on the robot):
+    :func:`advance_station` to t [s], then :func:`check_joint_state` on the state reached, so a
+    diverging simulation stops the loop at once rather than when the logs are read."""
+    advance_station(simulator, station, root_context, t)
+    check_joint_state(station.GetOutputPort("panda_state").Eval(station.GetMyContextFromRoot(root_context)), t)
 
 
 def check_joint_state(state, t: float) -> None:
