@@ -2,14 +2,15 @@
 
 import numpy as np
 import pytest
-from pydrake.systems.analysis import Simulator
+from pydrake.systems.analysis import Simulator, SimulatorStatus
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
 from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
 from drake_skill.reward.pomrp import fit_pomrp
-from drake_skill.reward.systems import PomrpReward, PomrpRewardConfig
+from drake_skill.reward.systems import NonFiniteGoalData, PomrpReward, PomrpRewardConfig, RewardCapacityError
+from drake_skill.station.recording import stop_error
 
 TRUE = left_to_right_model(n_states=4, seed=0)
 PERIOD = 0.1
@@ -123,13 +124,22 @@ def test_period_is_configurable(pomrp, demo):
 
 
 def test_errors(pomrp, demo):
+    # A frame the reward cannot take stops the simulator (ReachedTermination, the reason in
+    # state), and stop_error gives it as the typed error, as the station's monitors do.
     diagram, reward, sim = _diagram(pomrp, TrajectorySource(_zoh(demo)), config=PomrpRewardConfig(capacity=10))
-    with pytest.raises(RuntimeError, match="more than capacity = 10 valid frames"):
-        sim.AdvanceTo(2.0)
+    status = sim.AdvanceTo(2.0)
+    assert status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition
+    assert status.return_time() == pytest.approx(1.0)
+    with pytest.raises(RewardCapacityError, match="more than capacity = 10 valid frames at t = 1.000 s"):
+        raise stop_error(status, sim.get_context())
     nan = demo.copy()
     nan[3, 0] = np.nan
     diagram, reward, sim = _diagram(pomrp, TrajectorySource(_zoh(nan)))
-    with pytest.raises(ValueError, match=r"goal_data\[0\] = nan at t = 0.300 s while valid"):
-        sim.AdvanceTo(1.0)
+    assert reward.stop_error(sim.get_context()) is None
+    status = sim.AdvanceTo(1.0)
+    assert status.return_time() == pytest.approx(0.3)
+    assert reward.goal_sequence(sim.get_context()).shape == (3, demo.shape[1])   # frames 0-2 kept
+    with pytest.raises(NonFiniteGoalData, match=r"goal_data\[0\] = nan at t = 0.300 s while valid"):
+        raise stop_error(status, sim.get_context())
     with pytest.raises(ValueError, match="config.period"):
         PomrpReward(pomrp, PomrpRewardConfig(period=0.0))

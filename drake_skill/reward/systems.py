@@ -28,6 +28,14 @@ smoothed posteriors, which need the whole sequence) and :meth:`verdict` read
 the result. Each reward is computed once: the filtered one here, online; the
 smoothed one offline from the goal sequence (``RolloutRunner``).
 
+A frame it cannot take stops the simulator as Drake's monitors do: the
+update returns ``EventStatus.ReachedTermination`` and keeps the reason in
+state ([code, time [s], index, value]: non-finite goal data, which element and its value, or
+more valid frames than ``capacity``); :meth:`PomrpReward.stop_error` gives it
+as the typed error (:class:`NonFiniteGoalData`, :class:`RewardCapacityError`),
+which ``drake_skill.station.recording.advance_station`` raises outside the
+simulator.
+
 
 ## The goal pipeline
 
@@ -54,12 +62,13 @@ import dataclasses as dc
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.systems.framework import Context, DiscreteValues, LeafSystem
+from pydrake.systems.framework import Context, DiscreteValues, EventStatus, LeafSystem
 
 from drake_skill.perception.systems import ObjectSegmenter, PcaeFeaturizer, PcaeFeaturizerConfig, add_object_segmenter
 from drake_skill.reward.pomrp import Pomrp
 
-__all__ = ["NonFiniteGoalData", "PomrpRewardConfig", "PomrpReward", "GoalPipeline", "add_goal_pipeline"]
+__all__ = ["NonFiniteGoalData", "RewardCapacityError", "PomrpRewardConfig", "PomrpReward", "GoalPipeline",
+           "add_goal_pipeline"]
 
 
 @dataclass
@@ -77,6 +86,14 @@ class NonFiniteGoalData(ValueError):
     """A valid frame's goal data is not finite (a rollout's failure reason "non_finite")."""
 
     reason = "non_finite"
+
+
+class RewardCapacityError(RuntimeError):
+    """More valid frames than ``PomrpRewardConfig.capacity`` (a configuration error; reason "error")."""
+
+
+# The stop codes kept in PomrpReward's state (0: running).
+_STOP_NON_FINITE, _STOP_CAPACITY = 1, 2
 
 
 class PomrpReward(LeafSystem):
@@ -104,6 +121,7 @@ class PomrpReward(LeafSystem):
         self._filter_index = self.DeclareDiscreteState(k + 3)
         self._frames_index = self.DeclareDiscreteState(self._capacity * d)
         self._rewards_index = self.DeclareDiscreteState(self._capacity)
+        self._stop_index = self.DeclareDiscreteState(4)     # [stop code, time [s], element index, value]
         self.DeclarePeriodicDiscreteUpdateEvent(config.period, 0.0, self._update)
         xd = {self.xd_ticket()}
         self._reward_port = self.DeclareVectorOutputPort("reward", 1, self._calc_reward, xd)
@@ -128,18 +146,14 @@ class PomrpReward(LeafSystem):
     # ---------------------------------------------------------------- update
     def _update(self, context: Context, discrete_state: DiscreteValues):
         if self._valid_port.HasValue(context) and self._valid_port.Eval(context)[0] <= 0.5:
-            return
+            return EventStatus.DidNothing()
         g = np.array(self._goal_port.Eval(context), dtype=float)
+        n = int(context.get_discrete_state(self._count_index).GetAtIndex(0))
         if not np.all(np.isfinite(g)):
             i = int(np.flatnonzero(~np.isfinite(g))[0])
-            raise NonFiniteGoalData(
-                f"PomrpReward: goal_data[{i}] = {g[i]} at t = {context.get_time():.3f} s while valid; "
-                "expected finite goal data, or valid = 0 for frames without it")
-        n = int(context.get_discrete_state(self._count_index).GetAtIndex(0))
+            return self._stop(context, discrete_state, [_STOP_NON_FINITE, context.get_time(), i, g[i]])
         if n >= self._capacity:
-            raise RuntimeError(
-                f"PomrpReward: more than capacity = {self._capacity} valid frames at "
-                f"t = {context.get_time():.3f} s; raise PomrpRewardConfig.capacity")
+            return self._stop(context, discrete_state, [_STOP_CAPACITY, context.get_time(), n, 0.0])
         k = self._k
         f = context.get_discrete_state(self._filter_index).get_value()
         log_belief, step_ll, reward = self._pomrp.filter_update(f[:k], g, first=(n == 0))
@@ -154,6 +168,26 @@ class PomrpReward(LeafSystem):
             frames.SetAtIndex(n * self._d + i, g[i])
         discrete_state.get_mutable_vector(self._rewards_index).SetAtIndex(n, reward)
         discrete_state.get_mutable_vector(self._count_index).SetAtIndex(0, n + 1)
+        return EventStatus.Succeeded()
+
+    def _stop(self, context: Context, discrete_state: DiscreteValues, stop: list):
+        discrete_state.get_mutable_vector(self._stop_index).SetFromVector(stop)
+        return EventStatus.ReachedTermination(self, "PomrpReward: a frame it cannot take (see stop_error)")
+
+    def stop_error(self, context: Context) -> RuntimeError | None:
+        """Why this system stopped the simulator in ``context`` (its own or a root context), as
+        the typed error, or None while it runs."""
+        context = self._own(context)
+        code, t, i, value = context.get_discrete_state(self._stop_index).get_value()
+        if code == _STOP_NON_FINITE:
+            return NonFiniteGoalData(
+                f"PomrpReward: goal_data[{int(i)}] = {value} at t = {t:.3f} s while valid; "
+                "expected finite goal data, or valid = 0 for frames without it")
+        if code == _STOP_CAPACITY:
+            return RewardCapacityError(
+                f"PomrpReward: more than capacity = {self._capacity} valid frames at "
+                f"t = {t:.3f} s; raise PomrpRewardConfig.capacity")
+        return None
 
     def _calc_reward(self, context: Context, output):
         output.SetAtIndex(0, context.get_discrete_state(self._filter_index).GetAtIndex(self._k + 1))

@@ -102,28 +102,38 @@ class RunLog:
 
 def advance_station(simulator, station, root_context, t: float) -> None:
     """``simulator.AdvanceTo(t)`` on a diagram holding ``station`` (nothing when t is not
-    after the context's time). A station's monitors stop the simulator by returning
-    ``EventStatus.ReachedTermination`` and keep the reason in their state; this raises
-    it as the station's typed error (``station.stop_error``: :class:`ReflexError`, on
-    the robot also ``StaleStatusError``), outside the simulator. Raises
-    :class:`SolverError` when SAP failed to converge, RuntimeError when another system
-    ended the simulation."""
+    after the context's time). A system that stops the simulator returns
+    ``EventStatus.ReachedTermination`` and keeps the reason in its state; this raises it
+    as the typed error, outside the simulator (:func:`stop_error`). Raises
+    :class:`SolverError` when SAP failed to converge."""
     try:
         status = None
         if t > root_context.get_time():
             status = simulator.AdvanceTo(t)
         tripped = status is not None and status.reason() == _TERMINATED
     except RuntimeError as e:
+        # Drake's SAP solver throws an untyped std::runtime_error; its text is the one
+        # thing that tells it apart, read here once and turned into a typed error.
         if "failed to converge" in str(e):
             time_s = root_context.get_time()
             raise SolverError(f"the contact solver failed to converge at t = {time_s:.3f} s: {e}", time_s) from e
         raise
     if tripped:
-        error = station.stop_error(root_context)
-        if error is None:     # another system ended the simulation
-            raise RuntimeError(f"the simulation ended at t = {status.return_time():.3f} s: "
-                               f"{status.FormatMessage()}")
-        raise error
+        raise stop_error(status, root_context, station)
+
+
+def stop_error(status, root_context, station=None) -> RuntimeError:
+    """The typed error for a simulator ``status`` that reached termination: the station's, when
+    given (``station.stop_error``: :class:`ReflexError`, on the robot also ``StaleStatusError``),
+    else that of the system that stopped it (``status.system().stop_error``, e.g. the
+    reward's ``NonFiniteGoalData``), else a RuntimeError naming the status."""
+    error = None if station is None else station.stop_error(root_context)
+    system = status.system()
+    if error is None and system is not None and hasattr(system, "stop_error"):
+        error = system.stop_error(system.GetMyContextFromRoot(root_context))
+    if error is None:
+        error = RuntimeError(f"the simulation ended at t = {status.return_time():.3f} s: {status.FormatMessage()}")
+    return error
 
 
 def advance_and_check(simulator, station, root_context, t: float) -> None:

@@ -10,8 +10,9 @@ The simulated station (``drake_skill.station.sim.builder``, its driver a
 
 The driver checks (:class:`DriverChecks`) are the drake-franka-driver's in
 position mode: a command must expect position control with 7 joint
-positions and no velocities or torques (else the driver throws:
-:class:`DriverProtocolError`), and a command whose wall-clock ``utime`` is
+positions and no velocities or torques (else the driver exits; here the
+checks stop the simulator and :meth:`SimRobot.stop` or :meth:`SimRobot.run`
+raises :class:`DriverProtocolError`), and a command whose wall-clock ``utime`` is
 more than ``expire_sec`` (0.1 s) away from the wall clock is dropped, the
 last accepted position held. Status goes out every plant step with
 Drake's ``PandaStatusSender`` (it stamps simulation time, which the hardware
@@ -39,8 +40,8 @@ from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.manipulation import (PandaCommandReceiver, PandaControlMode, PandaStatusSender,
                                   SchunkWsgCommandReceiver)
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.analysis import Simulator, SimulatorStatus
+from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, StateInterpolatorWithDiscreteDerivative
 from pydrake.systems.sensors import ImageToLcmImageArrayT
@@ -48,6 +49,7 @@ from pydrake.systems.sensors import ImageToLcmImageArrayT
 from drake_skill.station.scenario import Scenario, validate_scenario
 from drake_skill.station.drivers import JointSetpointDriver, PandaLcmDriver, require_panda_driver
 from drake_skill.station.make import make_station
+from drake_skill.station.recording import stop_error
 from drake_skill.station.success import judge_success
 
 N_JOINTS = 7
@@ -63,12 +65,17 @@ class DriverChecks(LeafSystem):
     Inputs: ``command`` (Python ``lcmt_panda_command``), ``position`` (7, the
     PandaCommandReceiver's output), ``position_measured`` (7). Output
     ``position`` (7): the last accepted command. Discrete state [held q (7),
-    accepted count, dropped count]. Every ``period`` s the latest message is
-    checked: a wrong control mode or sizes raise DriverProtocolError; a
-    ``utime`` more than ``expire_sec`` from the wall clock [us] is dropped.
-    At initialization the measured position is held (the driver starts at
-    the robot's position).
+    accepted count, dropped count, last utime, refused: control mode,
+    positions, velocities, torques (-1 while none was refused)]. Every
+    ``period`` s the latest message is checked: a ``utime`` more than
+    ``expire_sec`` from the wall clock [us] is dropped; a wrong control mode
+    or sizes, which the driver refuses by exiting, stop the simulator
+    (``EventStatus.ReachedTermination``, the command kept in state;
+    :meth:`stop_error` gives the DriverProtocolError). At initialization the
+    measured position is held (the driver starts at the robot's position).
     """
+
+    _ACCEPTED, _DROPPED, _UTIME, _REFUSED = N_JOINTS, N_JOINTS + 1, N_JOINTS + 2, N_JOINTS + 3
 
     def __init__(self, period: float, expire_sec: float = 0.1):
         super().__init__()
@@ -76,7 +83,7 @@ class DriverChecks(LeafSystem):
         self._msg = self.DeclareAbstractInputPort("command", AbstractValue.Make(lcmt_panda_command()))
         self._q = self.DeclareVectorInputPort("position", N_JOINTS)
         self._q_meas = self.DeclareVectorInputPort("position_measured", N_JOINTS)
-        self._state = self.DeclareDiscreteState(N_JOINTS + 3)   # [q_hold, accepted, dropped, last utime]
+        self._state = self.DeclareDiscreteState(N_JOINTS + 7)
         self.DeclareInitializationDiscreteUpdateEvent(self._latch)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._check)
         self.DeclareVectorOutputPort("position", N_JOINTS, self._calc_position, {self.xd_ticket()})
@@ -84,32 +91,43 @@ class DriverChecks(LeafSystem):
     def counts(self, context) -> tuple[int, int]:
         """(accepted, dropped) distinct commands so far in ``context``."""
         x = context.get_discrete_state(self._state).get_value()
-        return int(x[N_JOINTS]), int(x[N_JOINTS + 1])
+        return int(x[self._ACCEPTED]), int(x[self._DROPPED])
+
+    def stop_error(self, context) -> DriverProtocolError | None:
+        """The command the driver refused in ``context``, as a DriverProtocolError, or None."""
+        mode, n_q, n_v, n_tau = context.get_discrete_state(self._state).get_value()[self._REFUSED:].astype(int)
+        if mode < 0:
+            return None
+        return DriverProtocolError(
+            f"command refused: control_mode_expected {mode}, {n_q} positions, {n_v} velocities, "
+            f"{n_tau} torques (expected position mode with {N_JOINTS} positions)")
 
     def _latch(self, context, discrete_state):
-        x = np.zeros(N_JOINTS + 3)
+        x = np.zeros(N_JOINTS + 7)
         x[:N_JOINTS] = self._q_meas.Eval(context)
-        x[N_JOINTS + 2] = float(self._msg.Eval(context).utime)   # a message from before the reset is old
+        x[self._UTIME] = float(self._msg.Eval(context).utime)   # a message from before the reset is old
+        x[self._REFUSED:] = -1.0
         discrete_state.set_value(self._state, x)
 
     def _check(self, context, discrete_state):
         msg = self._msg.Eval(context)
         x = context.get_discrete_state(self._state).get_value().copy()
-        if msg.utime == 0 or float(msg.utime) == x[N_JOINTS + 2]:
-            return
-        x[N_JOINTS + 2] = float(msg.utime)
+        if msg.utime == 0 or float(msg.utime) == x[self._UTIME]:
+            return EventStatus.DidNothing()
+        x[self._UTIME] = float(msg.utime)
         if (msg.control_mode_expected != lcmt_panda_status.CONTROL_MODE_POSITION
                 or msg.num_joint_position != N_JOINTS or msg.num_joint_velocity or msg.num_joint_torque):
-            raise DriverProtocolError(
-                f"command refused: control_mode_expected {msg.control_mode_expected}, "
-                f"{msg.num_joint_position} positions, {msg.num_joint_velocity} velocities, "
-                f"{msg.num_joint_torque} torques (expected position mode with {N_JOINTS} positions)")
+            x[self._REFUSED:] = [msg.control_mode_expected, msg.num_joint_position, msg.num_joint_velocity,
+                                 msg.num_joint_torque]
+            discrete_state.set_value(self._state, x)
+            return EventStatus.ReachedTermination(self, "the driver refused a command (see stop_error)")
         if abs(time.time() * 1e6 - msg.utime) > self._expire_us:
-            x[N_JOINTS + 1] += 1                       # expired: dropped, position held
+            x[self._DROPPED] += 1                       # expired: dropped, position held
         else:
             x[:N_JOINTS] = self._q.Eval(context)
-            x[N_JOINTS] += 1
+            x[self._ACCEPTED] += 1
         discrete_state.set_value(self._state, x)
+        return EventStatus.Succeeded()
 
     def _calc_position(self, context, output):
         output.SetFromVector(context.get_discrete_state(self._state).get_value()[:N_JOINTS])
@@ -319,7 +337,7 @@ class SimRobot:
             self._prepare(seed)
             self._ready.set()
             while not self._stop.is_set():
-                self.simulator.AdvanceTo(self.context.get_time() + 0.02)
+                self._advance(self.context.get_time() + 0.02)
         except BaseException as error:   # reported by stop()
             self._error = error
             self._ready.set()
@@ -328,7 +346,14 @@ class SimRobot:
         """Resets to ``seed`` and runs in real time in this thread for ``duration`` s (inf: until interrupted)."""
         self._prepare(seed)
         while self.context.get_time() < duration:
-            self.simulator.AdvanceTo(min(self.context.get_time() + 0.1, float(duration)))
+            self._advance(min(self.context.get_time() + 0.1, float(duration)))
+
+    def _advance(self, t: float) -> None:
+        """AdvanceTo(t); a system that stopped the simulator (the driver checks on a refused
+        command) raises its typed error here (``recording.advance_station``'s way)."""
+        status = self.simulator.AdvanceTo(t)
+        if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
+            raise stop_error(status, self.context)
 
     def stop(self) -> None:
         """Stops the background thread (status and camera stop); re-raises its error."""
