@@ -88,6 +88,15 @@ def test_a_damaged_run_or_grid_file_names_itself_and_the_fix(tmp_path):
         str(raised.value)
 
 
+# The workcell (models/workcell.dmd.yaml) written out as a user's scenario may write it: the robot's
+# add_directives, the table and its weld (``{child}``: the weld's child frame), as directives[0..2].
+WORKCELL = """- add_directives: {{file: "package://drake_skill_models/panda_robot.dmd.yaml"}}
+- add_model: {{name: table, file: "package://drake_skill_models/table.sdf"}}
+- add_weld: {{parent: world, child: {child}}}
+"""
+WORKCELL_LINE = '- add_directives: {file: "package://drake_skill_models/workcell.dmd.yaml"}\n'
+
+
 @pytest.mark.parametrize("child, expected", [
     ("table::table_topp", "no frame 'table_topp' in model 'table' (its frames: __model__, table_top)"),
     ("tablee::table_top", "There is no model instance named 'tablee'"),
@@ -95,35 +104,37 @@ def test_a_damaged_run_or_grid_file_names_itself_and_the_fix(tmp_path):
 def test_a_directive_naming_no_frame_or_model_is_named_by_its_index(child, expected):
     """A scenario's weld to a frame or model that does not exist: Drake's RuntimeError (a traceback,
     once) becomes one line naming the directive (issue 47)."""
+    from pydrake.common.yaml import yaml_load_typed
+    from pydrake.multibody.parsing import ModelDirectives
+
     from drake_skill.skills import scenario_for_skill
     from drake_skill.station.make import make_station
 
     config = scenario_for_skill("open")
     config.enable_camera = False
-    (i, weld), = [(i, d.add_weld) for i, d in enumerate(config.directives)
-                  if d.add_weld is not None and d.add_weld.child == "table::table_top"]
-    weld.child = child
+    config.directives = yaml_load_typed(schema=ModelDirectives, data="directives:\n" + WORKCELL.format(child=child)
+                                        + '- add_model: {name: box, file: "package://drake_skill_models/box.sdf"}\n'
+                                        ).directives
     with pytest.raises(ValueError) as raised:
         make_station(config)
     message = str(raised.value)
-    assert message.startswith(f"scenario directives[{i}] (add_weld {{parent: world, child: {child}}}): ")
+    assert message.startswith(f"scenario directives[2] (add_weld {{parent: world, child: {child}}}): ")
     assert expected in message and message.endswith("; fix that directive") and "\n" not in message
 
 
 @pytest.mark.parametrize("edit, expected", [
-    (("table::table_top}", "table::table_topX}"),
+    ((WORKCELL_LINE, WORKCELL.format(child="table::table_topX")),
      "directives[2] (add_weld {parent: world, child: table::table_topX}): no frame 'table_topX' in model 'table'"),
-    (("package://drake_skill_models/drawer.sdf", "broken.sdf"), "directives[3] (add_model {name: drawer, file: file://"),
+    (("package://drake_skill_models/drawer.sdf", "broken.sdf"), "directives[1] (add_model {name: drawer, file: file://"),
 ])
 def test_a_scenario_file_with_a_bad_directive_is_one_line_naming_the_file(tmp_path, capsys, edit, expected):
     _bad_scenario(tmp_path, capsys, edit, f"scenario {expected}", "; fix that directive")
 
 
 def test_a_scenario_including_a_missing_directives_file_names_the_scenario_and_the_field(tmp_path, capsys):
-    _bad_scenario(tmp_path, capsys, ("package://drake_skill_models/panda_robot.dmd.yaml", "no_robot.dmd.yaml"),
+    _bad_scenario(tmp_path, capsys, ("package://drake_skill_models/workcell.dmd.yaml", "no_workcell.dmd.yaml"),
                   "scenario field 'directives[0].add_directives.file' = 'file://",
-                  "no_robot.dmd.yaml does not exist)")
-
+                  "no_workcell.dmd.yaml does not exist)")
 
 
 def _bad_scenario(tmp_path, capsys, edit, expected, end):

@@ -219,6 +219,37 @@ def test_shipped_scenarios_are_yaml_files_in_the_package():
         assert dump_scenario(again) == dump_scenario(config)
 
 
+def test_the_workcell_written_out_builds_the_same_station():
+    """models/workcell.dmd.yaml (the robot and the table, written once; issue 46 item 3), and a user's
+    scenario that lists its three directives itself, build the same plant; a run stored with the
+    three lines is the same station as one with the workcell's add_directives."""
+    from pydrake.multibody.tree import BodyIndex
+
+    from drake_skill.station.make import make_station
+    from drake_skill.station.scenario import ROBOT_DIRECTIVES, WORKCELL_FILE, dump_scenario, same_station
+
+    assert ROBOT_DIRECTIVES.strip() == f'- add_directives: {{file: "{WORKCELL_FILE}"}}'
+    box = '- add_model: {name: box, file: "package://drake_skill_models/box.sdf"}\n'
+    written_out = """directives:
+- add_directives: {file: "package://drake_skill_models/panda_robot.dmd.yaml"}
+- add_model: {name: table, file: "package://drake_skill_models/table.sdf"}
+- add_weld: {parent: world, child: table::table_top}
+""" + box
+    configs = [load_scenario(data=text, overrides=["enable_camera: false"])
+               for text in ("directives:" + ROBOT_DIRECTIVES + box, written_out)]
+    poses = []
+    for config in configs:
+        plant = make_station(config).plant
+        context = plant.CreateDefaultContext()
+        poses.append({(plant.GetModelInstanceName(b.model_instance()), b.name()):
+                      plant.EvalBodyPoseInWorld(context, b).GetAsMatrix4().tolist()
+                      for b in (plant.get_body(BodyIndex(i)) for i in range(plant.num_bodies()))})
+    assert poses[0] == poses[1]
+    assert poses[0][("table", "table_top")] == np.eye(4).tolist()
+    assert same_station(*(dump_scenario(c) for c in configs))
+    assert not same_station(dump_scenario(configs[0]), dump_scenario(configs[0]).replace("box.sdf", "drawer.sdf"))
+
+
 def test_object_joint_can_be_set():
     sim = StationSimulation(_no_camera("open"))
     sim.station.set_object_joint(sim.context, 0.7)

@@ -116,6 +116,9 @@ def process_directives(directives, plant, parser) -> None:
 
 ROBOT_FILE = "panda_robot.dmd.yaml"
 """The robot's model directives (the arm and its hand; models folder): the one definition."""
+WORKCELL_FILE = "workcell.dmd.yaml"
+"""The workcell's model directives (models folder): ``ROBOT_FILE`` and the table welded on the
+world origin, the one definition of both; every shipped scenario includes it, then adds its object."""
 
 
 def instance_directives(directives, instances) -> list:

@@ -42,14 +42,15 @@ from drake_skill.station.models import model_url
 
 #: The model instances every station's directives must add (the object's is named in ``object.model``).
 ROBOT_MODELS = ("panda", "panda_hand", "table")
-#: The robot and the table as Drake model directives (``ProcessModelDirectives``):
-#: the Panda with its hand (``ROBOT_FILE``, the one definition of the robot), the
-#: table top welded at the world origin. A scenario's ``directives`` add the object.
+#: The Panda with its hand: the one definition of the robot (models/panda_robot.dmd.yaml).
 ROBOT_FILE = model_url(models.ROBOT_FILE)
+#: ``ROBOT_FILE`` and the table top welded at the world origin: the one definition of the
+#: workcell (models/workcell.dmd.yaml).
+WORKCELL_FILE = model_url(models.WORKCELL_FILE)
+#: The robot and the table as Drake model directives (``ProcessModelDirectives``): one
+#: ``add_directives`` of ``WORKCELL_FILE``. A scenario's ``directives`` add the object.
 ROBOT_DIRECTIVES = f"""
-- add_directives: {{file: "{ROBOT_FILE}"}}
-- add_model: {{name: table, file: "{model_url('table.sdf')}"}}
-- add_weld: {{parent: world, child: table::table_top}}
+- add_directives: {{file: "{WORKCELL_FILE}"}}
 """
 SCENARIO_DIR = Path(__file__).resolve().parent / "scenarios"
 #: The camera's pose: 1.3 m in front and 0.7 m to the right of the robot's base, 0.8 m up.
@@ -181,7 +182,7 @@ def robot_directives() -> list:
 
 
 def box_directives() -> list:
-    """The robot, the table and the shipped lidded box (the default scenario's models)."""
+    """The workcell (the robot and the table) and the shipped lidded box (the default scenario's models)."""
     box = yaml_load_typed(schema=_Directives, data="""directives:
 - add_model: {name: box, file: "package://drake_skill_models/box.sdf"}
 """).directives
@@ -276,8 +277,9 @@ class Scenario:
 
     plant: Drake's MultibodyPlantConfig (time step, contact model, SAP...).
     directives: the models, as Drake model directives (``ProcessModelDirectives``;
-      the manipulation course's ``Scenario`` does the same): ``ROBOT_DIRECTIVES``
-      (model instances ``panda``, ``panda_hand``, ``table``) and the object's
+      the manipulation course's ``Scenario`` does the same): ``ROBOT_DIRECTIVES`` (the
+      ``add_directives`` of ``WORKCELL_FILE``: model instances ``panda``, ``panda_hand``,
+      ``table``; a list that adds and welds them itself works alike) and the object's
       ``add_model`` (``package://drake_skill_models/...`` for the shipped
       models; ``file:///...`` or a path relative to the scenario file for yours).
     q_home: the Panda's initial joint positions [rad].
@@ -514,8 +516,9 @@ def dump_scenario(config: Scenario) -> str:
 
 def same_station(a: str, b: str) -> bool:
     """Whether two dumped station configs describe the same station: equal text, or equal with every
-    ``add_directives`` of a shipped file written out (a run stored before the robot moved into
-    ``ROBOT_FILE`` wrote its directives in full)."""
+    ``add_directives`` of a shipped file written out, those it includes too (a run stored before the
+    robot moved into ``ROBOT_FILE`` wrote its directives in full, one stored before the table moved
+    into ``WORKCELL_FILE`` wrote ``ROBOT_FILE``'s ``add_directives`` and the table's two lines)."""
     return a == b or _inlined(a) == _inlined(b)
 
 
@@ -523,15 +526,18 @@ def _inlined(text: str) -> str:
     from drake_skill.station.models import model_url, url_path
     from pydrake.multibody.parsing import LoadModelDirectives
 
+    def flat(directives) -> list:
+        out = []
+        for d in directives:
+            if d.add_directives is not None and d.add_directives.file.startswith(model_url("")) \
+                    and not d.add_directives.model_namespace:
+                out += flat(LoadModelDirectives(str(url_path(d.add_directives.file))).directives)
+            else:
+                out.append(d)
+        return out
+
     config = yaml_load_typed(schema=Scenario, data=text, defaults=Scenario())
-    flat = []
-    for d in config.directives:
-        if d.add_directives is not None and d.add_directives.file.startswith(model_url("")) \
-                and not d.add_directives.model_namespace:
-            flat += LoadModelDirectives(str(url_path(d.add_directives.file))).directives
-        else:
-            flat.append(d)
-    config.directives = flat
+    config.directives = flat(config.directives)
     return yaml_dump_typed(config)
 
 
@@ -555,7 +561,8 @@ def _validate_directives(config: Scenario) -> None:
     for name in ROBOT_MODELS:
         if name not in added:
             _bad("directives", added, f"the robot's models ({', '.join(ROBOT_MODELS)}): start the list with the "
-                 f"robot's directives (drake_skill/station/scenario.py ROBOT_DIRECTIVES: {ROBOT_FILE} and the table)")
+                 f"workcell's directives (drake_skill/station/scenario.py ROBOT_DIRECTIVES: add_directives "
+                 f"{WORKCELL_FILE}, the robot and the table)")
     obj = config.object
     if obj.model not in added:
         _bad("object.model", obj.model, f"the name of a model the directives add ({', '.join(added)})")
