@@ -27,7 +27,16 @@ skill's whole duration):
   ``q_home`` by their PD actuators, nothing else in the diagram), simulated
   for the rollout's duration; the floor a rollout can approach at the
   present physics. ``ratio_to_bare`` = the whole chain's ms of wall time per
-  simulated second / the bare plant's (required <= 2.5).
+  simulated second / the bare plant's (required <= 2.5); ``plant_only_ratio_to_bare``
+  the same for the plant with its drivers (``plant_only`` below);
+- ``driven_plant_ms_per_s``: the same bare plant, but its arm driven along the
+  plant-only rollout's own joint path by Drake's ``TrajectorySource`` into the
+  plant's joint PD (with the station's gravity compensation), the fingers at the
+  skill's opening, the object at that rollout's pose (:func:`bare_plant_ms_per_s`
+  with ``arm_path``): the hand meets the object as in the rollout, so this is
+  the rollout's physics (motion and contact) with Drake's own systems only.
+  ``plant_only_ratio_to_driven`` and ``ratio_to_driven`` divide by it: what the
+  station's drivers and the perception chain add to that physics.
 
 Real-time factor = simulated s / wall s, over the whole rollout (``tau`` +
 the settle time), after a short warm-up (the renderer's first frame). The
@@ -134,38 +143,62 @@ def _runner(skill, perception: bool, camera: bool = True):
     return RolloutRunner(skill, station_config, config)
 
 
-def bare_plant_ms_per_s(station_config, duration: float, repeats: int = 3) -> float:
+def bare_plant_ms_per_s(station_config, duration: float, repeats: int = 3, arm_path=None, X_WO=None,
+                        gripper_opening: float | None = None) -> float:
     """Milliseconds of wall time per simulated second of the scenario's plant alone
-    (module docstring), the fastest of ``repeats`` runs of ``duration`` s."""
+    (module docstring), the fastest of ``repeats`` runs of ``duration`` s.
+
+    ``arm_path`` = (times (N,) [s], q (N, 7) [rad]): the *driven* plant. The arm's desired
+    state follows that path (Drake's ``TrajectorySource`` of its first-order hold and the
+    hold's derivative, into the plant's own joint PD, with the station's gravity
+    compensation, Drake's ``InverseDynamics``) instead of holding ``q_home``, and
+    the object stands at ``X_WO`` (7: xyz + wxyz; default the nominal pose), the fingers
+    at ``gripper_opening`` [m] (default the scenario's home opening). Given a
+    rollout's own joint path and object pose, the hand meets the object as in the
+    rollout: the cost of the same physics with only Drake's own systems driving it.
+    """
     from pydrake.systems.analysis import Simulator
     from pydrake.systems.framework import DiagramBuilder
-    from pydrake.systems.primitives import ConstantVectorSource
+    from pydrake.systems.primitives import ConstantVectorSource, TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
 
     from drake_skill.station.placement import nominal_object_pose
-    from drake_skill.station.sim.builder import add_scene_plant
+    from drake_skill.station.recording import vector_to_pose
+    from drake_skill.station.sim.builder import add_gravity_compensation, add_scene_plant
 
     builder = DiagramBuilder()
     scene = add_scene_plant(builder, station_config)
     plant = scene.plant
     q_home = np.asarray(station_config.q_home, dtype=float)
-    fingers = np.full(2, station_config.gripper_home / 2)
-    for instance, desired in ((scene.panda, np.r_[q_home, np.zeros(7)]), (scene.hand, np.r_[fingers, np.zeros(2)]),
-                              (scene.object_instance, np.zeros(2))):
-        builder.Connect(builder.AddSystem(ConstantVectorSource(desired)).get_output_port(),
-                        plant.get_desired_state_input_port(instance))
-        n = plant.num_actuated_dofs(instance)
-        builder.Connect(builder.AddSystem(ConstantVectorSource(np.zeros(n))).get_output_port(),
-                        plant.get_actuation_input_port(instance))
+    opening = station_config.gripper_home if gripper_opening is None else float(gripper_opening)
+    fingers = np.full(2, opening / 2)
+    instances = [scene.panda, scene.hand, scene.object_instance]
+    desired = [np.r_[q_home, np.zeros(7)], np.r_[fingers, np.zeros(2)], np.zeros(2)]
+    sources = [ConstantVectorSource(x) for x in desired]
+    if arm_path is not None:
+        times, q = (np.asarray(v, dtype=float) for v in arm_path)
+        sources[0] = TrajectorySource(PiecewisePolynomial.FirstOrderHold(times, q.T), output_derivative_order=1)
+        gravity_plant = add_gravity_compensation(builder, scene, station_config.directives)   # noqa: F841 (kept alive)
+    for i, (instance, source) in enumerate(zip(instances, sources)):
+        builder.Connect(builder.AddSystem(source).get_output_port(), plant.get_desired_state_input_port(instance))
+        if arm_path is None or i == 2:
+            n = plant.num_actuated_dofs(instance)
+            builder.Connect(builder.AddSystem(ConstantVectorSource(np.zeros(n))).get_output_port(),
+                            plant.get_actuation_input_port(instance))
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     simulator = Simulator(diagram, context)
+    X_WO = nominal_object_pose(station_config) if X_WO is None else vector_to_pose(X_WO)
     best = math.inf
     for _ in range(max(1, repeats)):
         diagram.SetDefaultContext(context)
         context.SetTime(0.0)
         plant_context = plant.GetMyMutableContextFromRoot(context)
-        plant.SetFreeBodyPose(plant_context, scene.object_base, nominal_object_pose(station_config))
+        plant.SetFreeBodyPose(plant_context, scene.object_base, X_WO)
         scene.object_base.Lock(plant_context)
+        plant.SetPositions(plant_context, scene.hand, fingers)
+        if arm_path is not None:
+            plant.SetPositions(plant_context, scene.panda, q[0])
         simulator.Initialize()
         start = time.perf_counter()
         simulator.AdvanceTo(duration)
@@ -186,6 +219,7 @@ def _run(runner, skill, seed: int, timers: "_Timers | None" = None, warmup_s: fl
         raise RuntimeError(f"the benchmark rollout failed ({result.reason}): {result.message}")
     simulated = float(result.times[-1] - result.times[0])
     return {"wall_s": result.wall_s, "simulated_s": simulated, "rtf": simulated / result.wall_s,
+            "times": result.times, "joints": result.joints, "object_pose_true": result.object_pose_true,
             "return": result.dense_return, "verdict": result.verdict, "frames": len(result.rewards),
             "final_object_state": result.final_object_state, "success": result.success}
 
@@ -255,6 +289,9 @@ def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Pa
         for u in undo:
             u()
     bare_ms = bare_plant_ms_per_s(runner.config, full["simulated_s"], repeats)
+    driven_ms = bare_plant_ms_per_s(runner.config, full["simulated_s"], repeats,
+                                    arm_path=(plant["times"], plant["joints"]), X_WO=plant["object_pose_true"],
+                                    gripper_opening=skill.gripper_opening)
     parts = {k: timers.total.get(k, 0.0) for k in ("render", "cloud", "segmentation", "encoding", "reward")}
     parts["plant"] = full["wall_s"] - sum(parts.values())
     per_s = {k: round(1e3 * v / full["simulated_s"], 2) for k, v in parts.items()}
@@ -271,6 +308,10 @@ def run(skill_name: str = "open", seed: int = 0, object_seed: int = 3, cache: Pa
         "full_ms_per_s": round(1e3 / full["rtf"], 2),
         "bare_plant_ms_per_s": round(bare_ms, 2),
         "ratio_to_bare": round(1e3 / full["rtf"] / bare_ms, 3), "ratio_to_bare_required": RATIO_TO_BARE_REQUIRED,
+        "plant_only_ratio_to_bare": round(per_s["plant_only"] / bare_ms, 3),
+        "driven_plant_ms_per_s": round(driven_ms, 2),
+        "plant_only_ratio_to_driven": round(per_s["plant_only"] / driven_ms, 3),
+        "ratio_to_driven": round(1e3 / full["rtf"] / driven_ms, 3),
         "breakdown_ms_per_s": per_s,
         "per_frame_ms": {k: round(1e3 * parts[k] / frames, 2)
                          for k in ("render", "cloud", "segmentation", "encoding", "reward")},
@@ -374,7 +415,10 @@ def main(argv=None) -> int:
     print(f"  ratio              {result['ratio']:7.3f} (required >= {RATIO_REQUIRED})")
     print(f"  bare plant         {result['bare_plant_ms_per_s']:7.1f} ms per simulated s; whole chain "
           f"{result['full_ms_per_s']:.1f}: ratio_to_bare {result['ratio_to_bare']:.2f} "
-          f"(required <= {RATIO_TO_BARE_REQUIRED})")
+          f"(required <= {RATIO_TO_BARE_REQUIRED}); plant with drivers {result['plant_only_ratio_to_bare']:.2f}")
+    print(f"  driven plant       {result['driven_plant_ms_per_s']:7.1f} ms per simulated s (the same scene along "
+          f"the rollout's joint path, Drake's own systems only): plant with drivers "
+          f"{result['plant_only_ratio_to_driven']:.2f}, whole chain {result['ratio_to_driven']:.2f}")
     print("  ms per simulated s: " + ", ".join(f"{k} {v:.1f}" for k, v in result["breakdown_ms_per_s"].items()))
     print(f"  return {result['return']:.3f}, verdict {'success' if result['verdict'] else 'failure'}")
     return 0

@@ -129,6 +129,29 @@ class ScenePlant:
     robot_bodies: set
 
 
+def add_gravity_compensation(builder: DiagramBuilder, scene: "ScenePlant", directives=None) -> MultibodyPlant:
+    """Wires tau_g(q) of arm + hand (Drake's ``InverseDynamics`` in gravity-compensation mode on
+    :func:`make_gravity_plant` of ``directives``) into the arm's and the hand's actuation inputs
+    of ``scene``'s plant, as feed-forward. Returns the gravity plant (the system keeps a
+    reference to it; so must the caller)."""
+    plant, arm, hand = scene.plant, scene.panda, scene.hand
+    gravity_plant = make_gravity_plant(directives)
+    gravity = builder.AddNamedSystem("gravity_compensation", InverseDynamics(
+        gravity_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
+    mux = builder.AddNamedSystem("arm_hand_state", Multiplexer([14, 4]))
+    builder.Connect(plant.get_state_output_port(arm), mux.get_input_port(0))
+    builder.Connect(plant.get_state_output_port(hand), mux.get_input_port(1))
+    order = list(range(7)) + [14, 15] + list(range(7, 14)) + [16, 17]   # -> [q_arm, q_f, v_arm, v_f]
+    reorder = builder.AddNamedSystem("arm_hand_state_order", MatrixGain(np.eye(18)[order]))
+    builder.Connect(mux.get_output_port(), reorder.get_input_port())
+    builder.Connect(reorder.get_output_port(), gravity.get_input_port_estimated_state())
+    split = builder.AddNamedSystem("gravity_split", Demultiplexer([7, 2]))
+    builder.Connect(gravity.get_output_port_generalized_force(), split.get_input_port())
+    builder.Connect(split.get_output_port(0), plant.get_actuation_input_port(arm))
+    builder.Connect(split.get_output_port(1), plant.get_actuation_input_port(hand))
+    return gravity_plant
+
+
 def add_scene_plant(builder: DiagramBuilder, config: Scenario) -> ScenePlant:
     """Adds the scenario's MultibodyPlant (``config.plant``) and SceneGraph to ``builder``:
     Panda + hand + table + object, every surface's contact parameters, the
@@ -241,21 +264,7 @@ class Station(Diagram):
         self.gripper = gripper
         builder.Connect(gripper.GetOutputPort("finger_state_desired"), plant.get_desired_state_input_port(hand))
         builder.ExportInput(gripper.GetInputPort("opening"), "gripper_command")
-        # Gravity compensation: tau_g(q) of arm + hand as feed-forward actuation.
-        self._gravity_plant = make_gravity_plant(config.directives)
-        gravity = builder.AddNamedSystem("gravity_compensation", InverseDynamics(
-            self._gravity_plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
-        mux = builder.AddNamedSystem("arm_hand_state", Multiplexer([14, 4]))
-        builder.Connect(plant.get_state_output_port(arm), mux.get_input_port(0))
-        builder.Connect(plant.get_state_output_port(hand), mux.get_input_port(1))
-        order = list(range(7)) + [14, 15] + list(range(7, 14)) + [16, 17]   # -> [q_arm, q_f, v_arm, v_f]
-        reorder = builder.AddNamedSystem("arm_hand_state_order", MatrixGain(np.eye(18)[order]))
-        builder.Connect(mux.get_output_port(), reorder.get_input_port())
-        builder.Connect(reorder.get_output_port(), gravity.get_input_port_estimated_state())
-        split = builder.AddNamedSystem("gravity_split", Demultiplexer([7, 2]))
-        builder.Connect(gravity.get_output_port_generalized_force(), split.get_input_port())
-        builder.Connect(split.get_output_port(0), plant.get_actuation_input_port(arm))
-        builder.Connect(split.get_output_port(1), plant.get_actuation_input_port(hand))
+        self._gravity_plant = add_gravity_compensation(builder, scene, config.directives)
         # The object's friction actuator: zero set point (velocity 0), no feed-forward.
         hold = builder.AddNamedSystem("object_friction_setpoint", ConstantVectorSource(np.zeros(2)))
         builder.Connect(hold.get_output_port(), plant.get_desired_state_input_port(obj))
