@@ -123,9 +123,10 @@ def default_skill_config(skill, fit: str = "tolerance") -> SkillConfig:
     """SkillConfig of a skill (a shipped skill's name, a skill file or a SkillSpec),
     with the skill file's number of DMP bases (if it fixes one) and unscaled DMP columns.
 
+    The learned reward is the skill file's ``reward`` (docs/method.md section 4.4).
     ``fit = "thesis"``: the fit of the committed chapter-7 grid instead: the
-    10 Hz action data, Table 6.1's bases and the amplitude rule for scaled
-    columns (docs/method.md section 2.2).
+    10 Hz action data, Table 6.1's bases, the amplitude rule for scaled
+    columns (docs/method.md section 2.2) and the thesis's state reward.
     """
     if fit not in FITS:
         raise ValueError(f"fit: {fit!r}; expected one of {', '.join(FITS)}")
@@ -139,7 +140,7 @@ def default_skill_config(skill, fit: str = "tolerance") -> SkillConfig:
                            dmp_refine=0)
     if spec.dmp_bases is not None:
         dmp.n_basis = int(spec.dmp_bases)
-    return SkillConfig(skill=spec.name, spec=spec, dmp=dmp)
+    return SkillConfig(skill=spec.name, spec=spec, dmp=dmp, pomrp=PomrpConfig(reward=spec.reward))
 
 
 def _pcae_path(config: SkillConfig) -> Path:
@@ -528,7 +529,11 @@ def _skill_from_arrays(config: SkillConfig, arrays: dict, meta: dict, weights: P
                          f"{pca.n_components}")
     if version == 1:
         config.pomrp.off_model.enabled = False  # not recorded before version 2 (see Skill.load)
-    for name, saved in (("verdict", pomrp.verdict_config), ("off_model", pomrp.off_model_config)):
+    if config.pomrp.reward != pomrp.reward_kind:
+        raise ValueError(f"pomrp.reward: {yaml_path.name} says {config.pomrp.reward!r} but the saved reward is "
+                         f"{pomrp.reward_kind!r}; refit the skill")
+    for name, saved in (("verdict", pomrp.verdict_config), ("off_model", pomrp.off_model_config),
+                        ("progress", pomrp.progress_config)):
         if getattr(config.pomrp, name) != saved:
             raise ValueError(f"pomrp.{name}: {yaml_path.name} says {getattr(config.pomrp, name)} but the "
                              f"fitted reward in {json_path.name} uses {saved}")

@@ -14,7 +14,7 @@ from drake_skill.bench.reward import left_to_right_model, sample_demonstrations
 from drake_skill.fileio import atomic_save_npz, atomic_write_json, load_npz
 from drake_skill.reward.mrp import exact_values
 from drake_skill.reward.goal_model import GoalHMM, forward_backward
-from drake_skill.reward.pomrp import OffModelConfig, Pomrp, PomrpConfig, VerdictConfig, fit_pomrp
+from drake_skill.reward.pomrp import OffModelConfig, Pomrp, PomrpConfig, ProgressConfig, VerdictConfig, fit_pomrp
 from goal_model_support import two_state_model_arrays
 
 TRUE = left_to_right_model(n_states=4, seed=0)
@@ -355,7 +355,7 @@ def test_metadata_keys_and_a_non_default_verdict_round_trip(pomrp, held_out):
                    pomrp.info, pomrp.off_model_config, pomrp.frame_loglik_range, pomrp.data_covar,
                    pomrp.references)
     arrays, meta = strict.to_arrays()
-    assert set(meta) == {"hmm", "info", "verdict", "off_model"}
+    assert set(meta) == {"hmm", "info", "verdict", "off_model", "reward", "progress"}
     assert meta["hmm"] == pomrp.goal_model.to_arrays()[1]
     back = Pomrp.from_arrays(arrays, json.loads(json.dumps(meta)))
     assert back.verdict_config == VerdictConfig(True, 1.5)
@@ -621,3 +621,69 @@ def test_verdict_bounds_are_inclusive():
     assert at_floor.verdict_details(G)["final_frame_explained"]
     above = _guarded(frame_loglik_range=(np.nextafter(l_T, np.inf), l_T + 1.0), off_model=OffModelConfig(margin=0.0))
     assert not above.verdict_details(G)["final_frame_explained"]
+
+
+# ------------------------------------------------------------------ progress reward (method.md 4.4)
+@pytest.fixture(scope="module")
+def progress_pomrp():
+    X, lengths = sample_demonstrations(TRUE, [50, 60, 45], seed=0)
+    return fit_pomrp(X, lengths, PomrpConfig(reward="progress", progress=ProgressConfig(scale=100.0))), X, lengths
+
+
+def test_progress_line_and_the_demonstrations_own_progress(progress_pomrp):
+    pomrp, X, lengths = progress_pomrp
+    ends = np.cumsum(lengths)
+    first, last = X[ends - lengths], X[ends - 1]
+    np.testing.assert_allclose(pomrp.progress_line, [first.mean(axis=0), last.mean(axis=0)])
+    # p is 0 at the mean first frame and 1 at the mean last frame; the demonstrations average 1.
+    np.testing.assert_allclose(pomrp.progress(pomrp.progress_line), [0.0, 1.0], atol=1e-12)
+    own = [pomrp.progress(X[e - n:e])[-1] - pomrp.progress(X[e - n:e])[0] for e, n in zip(ends, lengths)]
+    assert np.mean(own) == pytest.approx(1.0) and pomrp.progress_least == pytest.approx(min(own))
+
+
+def test_progress_return_telescopes_and_ranks_how_far_the_object_moved(progress_pomrp, held_out, stalled):
+    pomrp = progress_pomrp[0]
+    for G in held_out:
+        h, R = pomrp.reward_and_return(G)
+        phi = pomrp.progress(G) * pomrp.explained_weights(G)
+        assert h[0] == 0.0 and R == pytest.approx(100.0 * (phi[-1] - phi[0]))
+        assert R == pytest.approx(h.sum()) and R > 50.0      # a demonstration-like run: about c
+        np.testing.assert_array_equal(pomrp.filtered_rewards(G), h)
+    half, start = pomrp.episode_return(stalled["halfway"]), pomrp.episode_return(stalled["start"])
+    assert min(pomrp.episode_return(G) for G in held_out) > half > start >= 0.0
+    # A run that ends behind where it started earns 0, as a failed rollout (never less).
+    assert pomrp.episode_return(held_out[0][::-1]) == 0.0
+
+
+def test_progress_verdict_needs_the_least_demonstrations_progress(progress_pomrp, held_out, stalled):
+    pomrp = progress_pomrp[0]
+    details = pomrp.verdict_details(held_out[0])
+    assert details["progress_needed"] == pytest.approx(0.95 * pomrp.progress_least)
+    assert all(pomrp.verdict(G) for G in held_out)
+    assert not pomrp.verdict(stalled["halfway"]) and not pomrp.verdict(stalled["start"])
+
+
+def test_progress_streaming_equals_offline_and_round_trips(progress_pomrp, held_out):
+    pomrp = progress_pomrp[0]
+    G = held_out[1]
+    lb, rewards = None, []
+    for t, g in enumerate(G):
+        lb, _, r = pomrp.filter_update(lb, g, first=(t == 0), previous=None if t == 0 else G[t - 1])
+        rewards.append(r)
+    np.testing.assert_allclose(rewards, pomrp.filtered_rewards(G), rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match="needs the previous frame"):
+        pomrp.filter_update(lb, G[1], first=False)
+    arrays, meta = pomrp.to_arrays()
+    back = Pomrp.from_arrays(arrays, json.loads(json.dumps(meta)))
+    assert back.reward_kind == "progress" and back.progress_config == ProgressConfig(scale=100.0)
+    assert back.episode_return(G) == pomrp.episode_return(G) and back.verdict(G) == pomrp.verdict(G)
+
+
+def test_progress_errors_name_the_cause(progress_pomrp):
+    X, lengths = progress_pomrp[1], progress_pomrp[2]
+    with pytest.raises(ValueError, match="reward: 'distance'; expected one of states, progress"):
+        fit_pomrp(X, lengths, PomrpConfig(reward="distance"))
+    still = np.repeat(X[:1], len(X), axis=0) + 1e-3 * np.random.default_rng(0).standard_normal(X.shape)
+    still[np.cumsum(lengths) - 1] = still[np.cumsum(lengths) - lengths]    # each ends where it began
+    with pytest.raises(ValueError, match="end where they start in goal space"):
+        fit_pomrp(still, lengths, PomrpConfig(reward="progress"))

@@ -28,6 +28,18 @@ For an execution's goal data ``G = g_1..g_T`` (``G: (T, d)``, 10 Hz frames):
   be explained (``l_T >= l_lo - margin``).  ``OffModelConfig(enabled=False)``
   is the thesis's plain form.
 
+* progress reward (``PomrpConfig.reward = "progress"``; docs/method.md section
+  4.4, an extension): the potential ``Phi_t = w_t p_t``, with
+  ``p_t = (g_t - s) . (e - s) / |e - s|^2`` the progress along the demonstrated
+  change (``s``, ``e``: the demonstrations' mean first and last frames, so a
+  demonstration's start is at 0 and their average end at 1), gives the per-step
+  reward ``h_t = c (Phi_t - Phi_(t-1))`` (``h_1 = 0``; ``c`` =
+  ``ProgressConfig.scale``) and the return ``R(G) = max(0, sum_t h_t) =
+  c max(0, Phi_T - Phi_1)``: how far the execution moved the object along the
+  change the demonstrations showed, from where it started. The verdict:
+  ``p_T - p_1 >= (1 - tolerance) x`` the least demonstration's own, and the
+  final frame explained. The goal HMM still filters the belief.
+
 Values ``v`` come from :mod:`drake_skill.reward.mrp`; rewards are unitless
 (value per frame), returns are sums over frames.
 """
@@ -51,7 +63,12 @@ from drake_skill.reward.goal_model import (
 from drake_skill.reward.goal_model.inference import _precision_cholesky
 from drake_skill.reward.mrp import MrpConfig, monte_carlo_values
 
-__all__ = ["VerdictConfig", "OffModelConfig", "PomrpConfig", "Pomrp", "fit_pomrp"]
+__all__ = ["VerdictConfig", "OffModelConfig", "ProgressConfig", "PomrpConfig", "Pomrp", "fit_pomrp",
+           "REWARDS"]
+
+#: What a POMRP's dense reward is: "states" (thesis Eq. 4.4, the MRP values of the
+#: belief) or "progress" (along the demonstrated change; docs/method.md section 4.4).
+REWARDS = ("states", "progress")
 
 
 @dataclass
@@ -96,13 +113,37 @@ class OffModelConfig:
 
 
 @dataclass
+class ProgressConfig:
+    """The progress reward (docs/method.md section 4.4; not in the thesis).
+
+    Attributes:
+      scale: ``c``, the return of an execution that moves the object as far as
+        the demonstrations do on average (unitless; of the order of the
+        thesis reward's demonstration returns, so that Eq. 5.1's weighting
+        ``exp(R / C)`` keeps its sharpness).
+      tolerance: the verdict calls an execution a success when its progress
+        reaches ``1 - tolerance`` of the least demonstration's (0.05: measured
+        in docs/method.md section 4.4).
+    """
+
+    scale: float = 1000.0
+    tolerance: float = 0.05
+
+
+@dataclass
 class PomrpConfig:
-    """Everything :func:`fit_pomrp` needs (loadable with ``yaml_load_typed``)."""
+    """Everything :func:`fit_pomrp` needs (loadable with ``yaml_load_typed``).
+
+    reward: "states" (thesis Eq. 4.4-4.5 and the Viterbi verdict) or "progress"
+      (:class:`ProgressConfig`; docs/method.md section 4.4).
+    """
 
     goal_model: GoalModelConfig = field(default_factory=GoalModelConfig)
     mrp: MrpConfig = field(default_factory=MrpConfig)
     verdict: VerdictConfig = field(default_factory=VerdictConfig)
     off_model: OffModelConfig = field(default_factory=OffModelConfig)
+    reward: str = "states"
+    progress: ProgressConfig = field(default_factory=ProgressConfig)
 
 
 class Pomrp:
@@ -121,11 +162,17 @@ class Pomrp:
       data_covar: ``S (d, d)``, the regularised covariance of all
         demonstration frames; references: ``(N, d)`` the demonstration frames
         ``x_j`` (:func:`fit_pomrp` computes all three).
+      reward: "states" or "progress" (:data:`REWARDS`); progress: its
+        :class:`ProgressConfig`; progress_line: ``(2, d)`` the demonstrations'
+        mean first and last frames ``s``, ``e``; progress_least: the least
+        demonstration's own progress ``p_T - p_1`` (both from :func:`fit_pomrp`,
+        required for "progress").
     """
 
     def __init__(self, goal_model: GoalHMM, values, verdict: VerdictConfig | None = None,
                  info: dict[str, Any] | None = None, off_model: OffModelConfig | None = None,
-                 frame_loglik_range=None, data_covar=None, references=None):
+                 frame_loglik_range=None, data_covar=None, references=None, reward: str = "states",
+                 progress: ProgressConfig | None = None, progress_line=None, progress_least: float | None = None):
         goal_model._check_fitted()
         v = np.asarray(values, dtype=float)
         k = goal_model.n_states_
@@ -174,6 +221,7 @@ class Pomrp:
             self.references = R
             if self.data_covar is not None:
                 self._om_ref = R @ self._om_prec[0]  # whitened: |(g - x) U|^2 = squared Mahalanobis
+        self._init_progress(reward, progress, progress_line, progress_least)
         # Parameters cached once: the reward path must stay well under 1 ms.
         self._startprob = goal_model.startprob_
         self._transmat = goal_model.transmat_
@@ -225,6 +273,44 @@ class Pomrp:
             return np.ones(len(G))
         return np.exp(np.minimum(0.0, self.frame_loglik(G) - self.explained_floor))
 
+    def _init_progress(self, reward, progress, line, least) -> None:
+        if reward not in REWARDS:
+            raise ValueError(f"reward: {reward!r}; expected one of {', '.join(REWARDS)}")
+        self.reward_kind = reward
+        self.progress_config = progress if progress is not None else ProgressConfig()
+        c = self.progress_config
+        if not (np.isfinite(c.scale) and c.scale > 0) or not 0.0 <= c.tolerance < 1.0:
+            raise ValueError(f"progress: expected scale > 0 and tolerance in [0, 1), got {c}")
+        self.progress_line = None if line is None or least is None else np.asarray(line, dtype=float)
+        self.progress_least = None if self.progress_line is None else float(least)
+        if self.progress_line is None:
+            if reward == "progress":
+                raise ValueError("progress_line, progress_least: required with reward 'progress' "
+                                 "(the demonstrations' mean first and last frames; fit_pomrp records them)")
+            return
+        d = self.goal_model.n_features_in_
+        if self.progress_line.shape != (2, d) or not np.all(np.isfinite(self.progress_line)):
+            raise ValueError(f"progress_line: expected finite (2, {d}) first and last frames, "
+                             f"got shape {self.progress_line.shape}")
+        change = self.progress_line[1] - self.progress_line[0]
+        if not float(change @ change) > 0 or not np.isfinite(self.progress_least):
+            raise ValueError("progress_line: the demonstrations end where they start in goal space (the "
+                             "camera saw no change of the object); progress cannot be measured")
+        self._progress_axis = change / float(change @ change)
+
+    def progress(self, G) -> np.ndarray:
+        """``p_t = (g_t - s) . (e - s) / |e - s|^2`` (T,): 0 at the demonstrations' mean first frame,
+        1 at their mean last frame, for ``G: (T, d)``."""
+        G = self._checked(G)
+        if self.progress_line is None:
+            raise ValueError("progress: this reward has no progress line (fitted before it existed); refit")
+        return (G - self.progress_line[0]) @ self._progress_axis
+
+    def _progress_rewards(self, G) -> np.ndarray:
+        """``h_t = c (Phi_t - Phi_(t-1))``, ``h_1 = 0``, with ``Phi_t = w_t p_t``."""
+        phi = self.progress(G) * self.explained_weights(self._checked(G))
+        return float(self.progress_config.scale) * np.diff(phi, prepend=phi[0])
+
     def _checked(self, G) -> np.ndarray:
         return check_sequences(G, name="G", n_features=self.n_features)[0]
 
@@ -234,8 +320,12 @@ class Pomrp:
         return forward_backward(self._log_b(G), self._startprob, self._transmat)
 
     def reward_and_return(self, G) -> tuple[np.ndarray, float]:
-        """Dense rewards ``h (T,)`` (Eq. 4.4, times the off-model weight ``w_t``) and return ``R`` (Eq. 4.5)."""
+        """Dense rewards ``h (T,)`` (Eq. 4.4, times the off-model weight ``w_t``) and return ``R`` (Eq. 4.5);
+        with the progress reward, ``h_t = c (Phi_t - Phi_(t-1))`` and ``R = max(0, sum_t h_t)``."""
         G = self._checked(G)
+        if self.reward_kind == "progress":
+            h = self._progress_rewards(G)
+            return h, max(0.0, float(h.sum()))
         _, smoothed, _ = forward_backward(self._log_b(G), self._startprob, self._transmat)
         h = (smoothed @ self.values) * self.explained_weights(G)
         return h, float(h.sum())
@@ -249,8 +339,11 @@ class Pomrp:
         return self.reward_and_return(G)[1]
 
     def filtered_rewards(self, G) -> np.ndarray:
-        """Reward available online at each ``t``: ``sum_s v(s) P(s_t = s | g_1..g_t)``, ``(T,)``."""
+        """Reward available online at each ``t``: ``sum_s v(s) P(s_t = s | g_1..g_t)``, ``(T,)`` (the
+        progress reward's ``h_t`` needs no smoothing: the same as :meth:`rewards`)."""
         G = self._checked(G)
+        if self.reward_kind == "progress":
+            return self._progress_rewards(G)
         filtered, _, _ = forward_backward(self._log_b(G), self._startprob, self._transmat, smooth=False)
         return (filtered @ self.values) * self.explained_weights(G)
 
@@ -265,7 +358,7 @@ class Pomrp:
         gm = self.goal_model
         return gaussian_log_density(g[None, :], gm.means_, gm._prec_chol, gm._log_norm)[0]
 
-    def filter_update(self, log_belief, g, first: bool):
+    def filter_update(self, log_belief, g, first: bool, previous=None):
         """One step of the forward filter in log space (Eq. 3.10, normalised).
 
         Args:
@@ -276,7 +369,9 @@ class Pomrp:
         Returns ``(log P(s_t | g_1..g_t) (k,), log P(g_t | g_1..g_{t-1}), reward_t)``;
         the second summed over ``t`` is ``log P(G)``, the third is the
         filtered reward ``w_t v . P(s_t | g_1..g_t)`` (the same as
-        :meth:`filtered_rewards` at ``t``).
+        :meth:`filtered_rewards` at ``t``). With the progress reward the third is
+        ``c (Phi(g) - Phi(previous))`` (0 on the first frame), ``previous`` the
+        frame before ``g`` (required then).
         """
         log_b = self.log_emission_frame(g)
         if first:
@@ -286,6 +381,13 @@ class Pomrp:
             la = logsumexp(lb[:, None] + self._log_transmat, axis=0) + log_b
         c = float(logsumexp(la))
         la = la - c
+        if self.reward_kind == "progress":
+            if first:
+                return la, c, 0.0
+            if previous is None:
+                raise ValueError("filter_update: the progress reward needs the previous frame")
+            pair = np.vstack([np.asarray(previous, dtype=float), np.asarray(g, dtype=float)])
+            return la, c, float(self._progress_rewards(pair)[1])
         w = float(self.explained_weights(np.asarray(g, dtype=float)[None, :])[0])
         return la, c, float(np.exp(la) @ self.values) * w
 
@@ -308,14 +410,22 @@ class Pomrp:
         in_range = bool(lo <= per_step <= hi)
         final_ll = float(self.frame_loglik(G[-1:])[0]) if self.references is not None else np.nan
         explained = bool(not self.off_model_config.enabled or final_ll >= self.explained_floor)
-        success = terminal and explained and (in_range or not self.verdict_config.require_likelihood)
-        return {"final_state": int(path[-1]), "terminal": terminal, "loglik_per_step": float(per_step),
-                "loglik_in_range": in_range, "final_frame_loglik": final_ll,
-                "final_frame_explained": explained, "success": bool(success)}
+        likely = in_range or not self.verdict_config.require_likelihood
+        details = {"final_state": int(path[-1]), "terminal": terminal, "loglik_per_step": float(per_step),
+                   "loglik_in_range": in_range, "final_frame_loglik": final_ll,
+                   "final_frame_explained": explained}
+        if self.reward_kind == "progress":
+            p = self.progress(G)
+            details["progress"] = float(p[-1] - p[0])
+            details["progress_needed"] = (1.0 - float(self.progress_config.tolerance)) * self.progress_least
+            return {**details, "success": bool(details["progress"] >= details["progress_needed"]
+                                               and explained and likely)}
+        return {**details, "success": bool(terminal and explained and likely)}
 
     def verdict(self, G) -> bool:
-        """Sparse success: Viterbi final state terminal, final frame explained (guard on) and,
-        if configured, likelihood in range."""
+        """Sparse success: Viterbi final state terminal (with the progress reward: progress
+        ``p_T - p_1`` at least ``1 - tolerance`` of the least demonstration's), final frame
+        explained (guard on) and, if configured, likelihood in range."""
         return self.verdict_details(G)["success"]
 
     # ------------------------------------------------------------ save/load
@@ -330,10 +440,15 @@ class Pomrp:
             out["data_covar"] = self.data_covar.copy()
         if self.references is not None:
             out["references"] = self.references.copy()
-        return out, {"hmm": meta, "info": self.info, "verdict": {
+        meta = {"hmm": meta, "info": self.info, "verdict": {
             "require_likelihood": bool(self.verdict_config.require_likelihood),
             "loglik_margin": float(self.verdict_config.loglik_margin)},
-            "off_model": dataclasses.asdict(self.off_model_config)}
+            "off_model": dataclasses.asdict(self.off_model_config),
+            "reward": self.reward_kind, "progress": dataclasses.asdict(self.progress_config)}
+        if self.progress_line is not None:
+            out["progress_line"] = self.progress_line.copy()
+            meta["progress_least"] = self.progress_least
+        return out, meta
 
     @classmethod
     def from_arrays(cls, arrays: dict[str, np.ndarray], metadata: dict[str, Any],
@@ -341,7 +456,8 @@ class Pomrp:
         """Inverse of :meth:`to_arrays`; ``prefix`` names the arrays in error messages.
 
         Metadata without ``off_model`` (written before the guard existed) load
-        with the guard off: the demonstrations' ``l_t`` range was not recorded.
+        with the guard off: the demonstrations' ``l_t`` range was not recorded;
+        without ``reward``, with the thesis's state reward.
         """
         if "values" not in arrays:
             raise ValueError(f"missing array '{prefix}values'")
@@ -354,10 +470,13 @@ class Pomrp:
         try:
             verdict = VerdictConfig(**metadata.get("verdict", {}))
             off_model = OffModelConfig(**metadata.get("off_model", {"enabled": False}))
+            progress = ProgressConfig(**metadata.get("progress", {}))
         except TypeError as e:
             raise ValueError(f"POMRP metadata: {e}") from e
         return cls(hmm, values, verdict, metadata.get("info", {}), off_model,
-                   arrays.get("frame_loglik_range"), arrays.get("data_covar"), arrays.get("references"))
+                   arrays.get("frame_loglik_range"), arrays.get("data_covar"), arrays.get("references"),
+                   reward=metadata.get("reward", "states"), progress=progress,
+                   progress_line=arrays.get("progress_line"), progress_least=metadata.get("progress_least"))
 
 
 def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
@@ -368,6 +487,8 @@ def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
     ``config.mrp.length`` is set.
     """
     config = config if config is not None else PomrpConfig()
+    if config.reward not in REWARDS:
+        raise ValueError(f"reward: {config.reward!r}; expected one of {', '.join(REWARDS)}")
     hmm = GoalHMM.from_config(config.goal_model).fit(X, lengths)
     mc = config.mrp
     L = int(mc.length) if mc.length > 0 else int(np.floor(hmm.lengths_.mean()))
@@ -396,7 +517,25 @@ def fit_pomrp(X, lengths=None, config: PomrpConfig | None = None) -> Pomrp:
         parts.append(_nearest_loglik(Y[own], others, float(log_norm[0])))
     l_loo = np.concatenate(parts)
     l_range = (float(np.quantile(l_loo, om.quantile)), float(l_loo.max()))
-    return Pomrp(hmm, v, config.verdict, info, om, l_range, S, X)
+    line, least = _progress_line(X, lengths)
+    if line is None and config.reward == "progress":
+        raise ValueError("reward 'progress': the demonstrations end where they start in goal space (the camera "
+                         "saw no change of the object); check the camera with 'drake-skill skills --check-camera'")
+    return Pomrp(hmm, v, config.verdict, info, om, l_range, S, X, reward=config.reward,
+                 progress=config.progress, progress_line=line, progress_least=least)
+
+
+def _progress_line(X: np.ndarray, lengths: np.ndarray) -> tuple[np.ndarray | None, float | None]:
+    """The demonstrations' mean first and last frames ``(2, d)`` and the least demonstration's own
+    progress ``p_T - p_1`` along them; (None, None) when they end where they start."""
+    ends = np.cumsum(lengths)
+    first, last = X[ends - lengths], X[ends - 1]
+    line = np.vstack([first.mean(axis=0), last.mean(axis=0)])
+    change = line[1] - line[0]
+    if not float(change @ change) > 1e-12 * max(1.0, float((line * line).sum())):
+        return None, None
+    own = (last - first) @ change / float(change @ change)
+    return line, float(own.min())
 
 
 def _nearest_loglik(Y: np.ndarray, R: np.ndarray, log_norm: float) -> np.ndarray:

@@ -156,7 +156,10 @@ class PomrpReward(LeafSystem):
             return self._stop(context, discrete_state, [_STOP_CAPACITY, context.get_time(), n, 0.0])
         k = self._k
         f = context.get_discrete_state(self._filter_index).get_value()
-        log_belief, step_ll, reward = self._pomrp.filter_update(f[:k], g, first=(n == 0))
+        previous = None      # the frame before g (the progress reward's Phi_(t-1))
+        if n > 0:
+            previous = context.get_discrete_state(self._frames_index).get_value()[(n - 1) * self._d:n * self._d]
+        log_belief, step_ll, reward = self._pomrp.filter_update(f[:k], g, first=(n == 0), previous=previous)
         new_f = np.empty(k + 3)
         new_f[:k] = log_belief
         new_f[k] = (f[k] if n > 0 else 0.0) + step_ll

@@ -14,6 +14,7 @@ from pydrake.common.schema import Transform
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_skill import typed_yaml
+from drake_skill.reward.pomrp import REWARDS
 from drake_skill.typed_yaml import load_typed
 from drake_skill.station.scenario import (SCENARIO_DIR, Scenario, SuccessConfig, load_scenario,
                                         object_joint_name, validate_success)
@@ -79,6 +80,9 @@ class SkillSpec:
     initial_dmp_poses: object poses per DMP for "best-return".
     gripper_opening: the finger opening [m] the skill holds while it runs;
       None: the median of the demonstrations' (docs/method.md section 2).
+    reward: the learned reward: "progress" (default; how far the object moved along
+      the change the demonstrations showed, docs/method.md section 4.4) or "states"
+      (thesis Eq. 4.4, the MRP values of the goal HMM's states; the thesis skills').
     success: the ground-truth rule on the object's joint (simulation only).
     keyframes: the scripted demonstrator's motion; empty: demonstrations
       come from Meshcat teleoperation or the robot.
@@ -94,6 +98,7 @@ class SkillSpec:
     initial_dmp: str = "random"
     initial_dmp_poses: int = 3
     gripper_opening: typing.Optional[float] = None
+    reward: str = "progress"
     success: SuccessConfig = dc.field(default_factory=SuccessConfig)
     keyframes: typing.List[Keyframe] = dc.field(default_factory=list)
 
@@ -152,6 +157,8 @@ def _check(spec: SkillSpec, where: str) -> SkillSpec:
     if spec.gripper_opening is not None and not 0.0 <= spec.gripper_opening <= 2 * FINGER_MAX:
         _bad(where, "gripper_opening", spec.gripper_opening,
              f"an opening in [0, {2 * FINGER_MAX}] m, or null for the demonstrations' median")
+    if spec.reward not in REWARDS:
+        _bad(where, "reward", spec.reward, f"one of {', '.join(REWARDS)} (docs/method.md section 4.4)")
     validate_success(spec.success, "success", what=f"skill file {where}")
     t_prev = 0.0
     for i, k in enumerate(spec.keyframes):
