@@ -283,6 +283,7 @@ class Skill:
             f"{self.config.pomrp.goal_model.criterion.upper()}), terminal states "
             f"{list(map(int, self.pomrp.terminal_states))}",
             "state values: " + ", ".join(f"{i}: {v:.2f}" for i, v in enumerate(self.pomrp.values)),
+            self._reward_line(),
             (f"off-model guard: frames below {self.pomrp.explained_floor:.1f} nats (demonstrations' lowest "
              f"{self.pomrp.frame_loglik_range[0]:.1f} - {self.pomrp.off_model_config.margin:g}) earn less reward "
              "and fail the verdict" if self.pomrp.off_model_config.enabled
@@ -292,6 +293,14 @@ class Skill:
                 for r, ok in zip(self.info["demo_returns"], self.info["demo_verdicts"])),
         ]
         return "\n".join(lines)
+
+    def _reward_line(self) -> str:
+        p = self.pomrp
+        if p.reward_kind == "states":
+            return "reward: the goal HMM's state values (thesis Eq. 4.4-4.5), verdict: final Viterbi state terminal"
+        return (f"reward: progress along the demonstrated change x {p.progress_config.scale:g} (docs/method.md "
+                f"4.4), verdict: progress >= {(1 - p.progress_config.tolerance) * p.progress_least:.2f} "
+                f"({1 - p.progress_config.tolerance:g} x the least demonstration's {p.progress_least:.2f})")
 
     def fit_report(self) -> tuple[list[str], list[str]]:
         """``(lines, warnings)`` on the DMP fit (docs/method.md section 2.2): B and how it was
