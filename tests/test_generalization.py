@@ -57,7 +57,7 @@ def test_the_report_pools_each_skills_rollouts_and_marks_the_criteria(tmp_path):
                                                                                     ("turn", "0")]
     assert [r["held_out_after"] for r in rows] == ["1", "0.8", "0.4"] and rows[1]["wall_s"] == "120"
     readme = (out / "README.md").read_text()
-    assert "| lift | 2 | 1.00 | 0.25 | 0.00 | 0.6 | 1.0, 0.8 | 0.06 | 16 | 3 of 4 |" in readme
+    assert "| lift | 2 | - | 1.00 | 0.25 | 0.00 | 0.6 | 1.0, 0.8 | 0.06 | 16 | 3 of 4 |" in readme
     assert readme.startswith("# Generalization: learning on every skill with `drake-skill learn`'s defaults")
     # A study of the span (grid.json says so) names it.
     (out / "grid.json").write_text(json.dumps({"exploration": "span"}))

@@ -162,17 +162,20 @@ def readme_text(summary: dict, rows, exploration: str = "basis") -> str:
         search = f"PI^2-ES-Cov over the demonstrations' {exploration} (docs/method.md 5.2)"
     lines = [f"# Generalization: learning on every skill with {title}", "",
              "Written by `drake-skill experiment generalization` (drake_skill/experiments/generalization.py) "
-             f"from the stored runs; rerun it to continue or refresh. Each run: {search}, dense learned reward, "
+             f"from the stored runs; rerun it to continue or refresh. Each run: {search}, dense learned reward "
+             "(the skill file's: `states`, thesis Eq. 4.4, or `progress`, docs/method.md 4.4), "
              "5 x 6 rollouts, tolerance fit, guarded selection (docs/method.md 5.1), 10 held-out poses.",
              f"Code: {summary['code']}.", "",
-             "| skill | seeds | reward AUC | verdict FPR | verdict FNR | held-out before | held-out after (per seed) "
-             "| reflex rate | rollouts | criteria met |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| skill | seeds | reward | reward AUC | verdict FPR | verdict FNR | held-out before "
+             "| held-out after (per seed) | reflex rate | rollouts | criteria met |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for skill, e in summary["skills"].items():
         marks = verdicts(e)
         met = sum(v is True for v in marks.values())
         after = ", ".join(_fmt(v, ".1f") for v in e["held_out_after"])
         before = _fmt(e["held_out_before"][0] if e["held_out_before"] else None, ".1f")
-        lines.append(f"| {skill} | {len(e['seeds'])} | {_fmt(e['reward_auc'])} | {_fmt(e['verdict_fpr'])} | "
+        lines.append(f"| {skill} | {len(e['seeds'])} | {e.get('reward') or '-'} | {_fmt(e['reward_auc'])} | "
+                     f"{_fmt(e['verdict_fpr'])} | "
                      f"{_fmt(e['verdict_fnr'])} | {before} | {after} | {e['reflex_rate']:.2f} | {e['rollouts']} | "
                      f"{met} of {len(marks)} |")
     lines += ["", "## Criteria per skill (issue 45, Must show)", ""]
@@ -209,13 +212,15 @@ def write_report(out, rules: dict | None = None) -> list[Path]:
     runs = _runs(out)
     skills = {}
     for skill, skill_runs in sorted(runs.items()):
-        if rules is not None and skill in rules:
-            rule = rules[skill]
-        else:
+        fitted = None
+        if (out / skill / "initial_skill" / "skill.json").is_file():
             from drake_skill.fitted_skill import Skill
 
-            rule = Skill.load(out / skill / "initial_skill").spec.success
+            fitted = Skill.load(out / skill / "initial_skill")
+        rule = rules[skill] if rules is not None and skill in rules else fitted.spec.success
         skills[skill] = _skill_figures(out, skill, skill_runs, rule)
+        # The learned reward the runs used (docs/method.md 4.4): the fitted skill's.
+        skills[skill]["reward"] = None if fitted is None else fitted.pomrp.reward_kind
     rows = run_rows(out)
     summary = {"code": _code(runs), "skills": skills}
     paths = [atomic_write_text(out / "table.csv", _table_text(rows)),
