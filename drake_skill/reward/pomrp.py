@@ -301,14 +301,17 @@ class Pomrp:
     def progress(self, G) -> np.ndarray:
         """``p_t = (g_t - s) . (e - s) / |e - s|^2`` (T,): 0 at the demonstrations' mean first frame,
         1 at their mean last frame, for ``G: (T, d)``."""
-        G = self._checked(G)
         if self.progress_line is None:
             raise ValueError("progress: this reward has no progress line (fitted before it existed); refit")
+        return self._progress_of(self._checked(G))
+
+    def _progress_of(self, G: np.ndarray) -> np.ndarray:
+        """:meth:`progress` of checked goal data."""
         return (G - self.progress_line[0]) @ self._progress_axis
 
-    def _progress_rewards(self, G) -> np.ndarray:
-        """``h_t = c (Phi_t - Phi_(t-1))``, ``h_1 = 0``, with ``Phi_t = w_t p_t``."""
-        phi = self.progress(G) * self.explained_weights(self._checked(G))
+    def _progress_rewards(self, G: np.ndarray) -> np.ndarray:
+        """``h_t = c (Phi_t - Phi_(t-1))``, ``h_1 = 0``, with ``Phi_t = w_t p_t``, for checked ``G``."""
+        phi = self._progress_of(G) * self.explained_weights(G)
         return float(self.progress_config.scale) * np.diff(phi, prepend=phi[0])
 
     def _checked(self, G) -> np.ndarray:
@@ -386,7 +389,7 @@ class Pomrp:
                 return la, c, 0.0
             if previous is None:
                 raise ValueError("filter_update: the progress reward needs the previous frame")
-            pair = np.vstack([np.asarray(previous, dtype=float), np.asarray(g, dtype=float)])
+            pair = self._checked(np.vstack([np.asarray(previous, dtype=float), np.asarray(g, dtype=float)]))
             return la, c, float(self._progress_rewards(pair)[1])
         w = float(self.explained_weights(np.asarray(g, dtype=float)[None, :])[0])
         return la, c, float(np.exp(la) @ self.values) * w
@@ -398,7 +401,8 @@ class Pomrp:
         Keys: ``final_state`` (Viterbi), ``terminal`` (final state in ``T``),
         ``loglik_per_step`` (nats per frame), ``loglik_in_range``,
         ``final_frame_loglik`` (``l_T``, nats), ``final_frame_explained``
-        (``l_T >= l_lo - margin``; True when the guard is off), ``success``.
+        (``l_T >= l_lo - margin``; True when the guard is off), ``success``; with the
+        progress reward also ``progress`` (``p_T - p_1``) and ``progress_needed``.
         """
         G = self._checked(G)
         log_b = self._log_b(G)
@@ -415,7 +419,7 @@ class Pomrp:
                    "loglik_in_range": in_range, "final_frame_loglik": final_ll,
                    "final_frame_explained": explained}
         if self.reward_kind == "progress":
-            p = self.progress(G)
+            p = self._progress_of(G)
             details["progress"] = float(p[-1] - p[0])
             details["progress_needed"] = (1.0 - float(self.progress_config.tolerance)) * self.progress_least
             return {**details, "success": bool(details["progress"] >= details["progress_needed"]

@@ -40,7 +40,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.lcm import DrakeLcm
 from pydrake.manipulation import (PandaCommandReceiver, PandaControlMode, PandaStatusSender,
                                   SchunkWsgCommandReceiver)
-from pydrake.systems.analysis import Simulator, SimulatorStatus
+from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder, EventStatus, LeafSystem
 from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.systems.primitives import ConstantVectorSource, Demultiplexer, StateInterpolatorWithDiscreteDerivative
@@ -49,7 +49,7 @@ from pydrake.systems.sensors import ImageToLcmImageArrayT
 from drake_skill.station.scenario import Scenario, validate_scenario
 from drake_skill.station.drivers import JointSetpointDriver, PandaLcmDriver, require_panda_driver
 from drake_skill.station.make import make_station
-from drake_skill.station.recording import stop_error
+from drake_skill.station.recording import advance_station
 from drake_skill.station.success import judge_success
 
 N_JOINTS = 7
@@ -75,7 +75,7 @@ class DriverChecks(LeafSystem):
     measured position is held (the driver starts at the robot's position).
     """
 
-    _ACCEPTED, _DROPPED, _UTIME, _REFUSED = N_JOINTS, N_JOINTS + 1, N_JOINTS + 2, N_JOINTS + 3
+    _ACCEPTED, _DROPPED, _UTIME, _REFUSED, _SIZE = N_JOINTS, N_JOINTS + 1, N_JOINTS + 2, N_JOINTS + 3, N_JOINTS + 7
 
     def __init__(self, period: float, expire_sec: float = 0.1):
         super().__init__()
@@ -83,7 +83,7 @@ class DriverChecks(LeafSystem):
         self._msg = self.DeclareAbstractInputPort("command", AbstractValue.Make(lcmt_panda_command()))
         self._q = self.DeclareVectorInputPort("position", N_JOINTS)
         self._q_meas = self.DeclareVectorInputPort("position_measured", N_JOINTS)
-        self._state = self.DeclareDiscreteState(N_JOINTS + 7)
+        self._state = self.DeclareDiscreteState(self._SIZE)
         self.DeclareInitializationDiscreteUpdateEvent(self._latch)
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._check)
         self.DeclareVectorOutputPort("position", N_JOINTS, self._calc_position, {self.xd_ticket()})
@@ -103,7 +103,7 @@ class DriverChecks(LeafSystem):
             f"{n_tau} torques (expected position mode with {N_JOINTS} positions)")
 
     def _latch(self, context, discrete_state):
-        x = np.zeros(N_JOINTS + 7)
+        x = np.zeros(self._SIZE)
         x[:N_JOINTS] = self._q_meas.Eval(context)
         x[self._UTIME] = float(self._msg.Eval(context).utime)   # a message from before the reset is old
         x[self._REFUSED:] = -1.0
@@ -349,11 +349,9 @@ class SimRobot:
             self._advance(min(self.context.get_time() + 0.1, float(duration)))
 
     def _advance(self, t: float) -> None:
-        """AdvanceTo(t); a system that stopped the simulator (the driver checks on a refused
-        command) raises its typed error here (``recording.advance_station``'s way)."""
-        status = self.simulator.AdvanceTo(t)
-        if status.reason() == SimulatorStatus.ReturnReason.kReachedTerminationCondition:
-            raise stop_error(status, self.context)
+        """``recording.advance_station`` to t: a system that stopped the simulator (the driver
+        checks on a refused command) raises its typed error here."""
+        advance_station(self.simulator, self.station, self.context, t)
 
     def stop(self) -> None:
         """Stops the background thread (status and camera stop); re-raises its error."""
