@@ -666,3 +666,34 @@ def test_one_factory_builds_each_driver_and_every_port_carries_what_its_name_say
                                          r"station speaks the Panda driver's LCM protocol; give the scenario driver: "
                                          r"!PandaLcmDriver \{\.\.\.\}"):
         make_station(config, hardware=True)
+
+
+def test_the_force_limit_yields_on_the_torques_the_robot_measures():
+    """With ``controller.force_limit`` on, the hardware station's controller gives way on the
+    driver's external joint torques (the robot measures no contact force): a press 3 cm into
+    the table at 5 cm/s ends with the reflex untripped and the hand above the command."""
+    hardware_config = _hardware_config(_scenario("open"))
+    hardware_config.driver.workspace.lower[2] = -0.3
+    hardware_config.controller.force_limit.enabled = True
+    lcm = DrakeLcm("memq://")
+    robot = SimRobot(hardware_config, lcm=lcm, pump=False)
+    station, source, context, simulator = _harness(hardware_config, lcm)
+    assert station.ee_controller.force_limit is not None
+    robot.start()
+    try:
+        station.reset(context)
+        X0 = station.GetOutputPort("ee_pose").Eval(station.GetMyContextFromRoot(context))
+        # The fingertips touch the table top with the TCP at z = 9 mm; commanded to z = -21 mm.
+        down = RigidTransform(X0.rotation(), X0.translation() * [1.0, 1.0, 0.0] - [0.0, 0.0, 0.021])
+        source.set_plan(source.GetMyMutableContextFromRoot(context),
+                        PosePlan.from_poses([0.0, 0.2, 6.2], [X0, X0, down], [0.0] * 3))
+        simulator.Initialize()
+        advance_station(simulator, station, context, 7.0)
+        station_context = station.GetMyContextFromRoot(context)
+        z = station.GetOutputPort("ee_pose").Eval(station_context).translation()[2]
+        tau = station.GetOutputPort("reflex_state").Eval(station_context)[1:8]
+    finally:
+        robot.stop()
+    limit = np.asarray(hardware_config.reflex.external_torque_max)
+    assert np.max(np.abs(tau) / limit) > hardware_config.controller.force_limit.start - 0.1   # it pressed
+    assert z > -0.021 + 0.02

@@ -285,9 +285,17 @@ class EndEffectorController(Diagram):
     integrator starts, at ``Initialize``, at the positions of the optional input
     ``robot_state`` (14: the arm's [q, v]) when it is connected, else call
     :meth:`set_joint_positions`.
+
+    With ``config.force_limit.enabled`` (and ``reflex``, the scenario's ``ReflexConfig``), a
+    :class:`~drake_skill.station.force_limit.ForceLimit` after the rate limiter moves the
+    commanded joint positions so that the hand yields along the measured external force near
+    the reflex's limits (updated every ``update_period``, default the limiter's). It adds the
+    input ``reflex_state`` (the reflex monitor's ``filtered``) and reads ``robot_state``,
+    which must then be connected.
     """
 
-    def __init__(self, config: ControllerConfig, q_home, update_period: float | None = None, directives=None):
+    def __init__(self, config: ControllerConfig, q_home, update_period: float | None = None, directives=None,
+                 reflex=None):
         super().__init__()
         builder = DiagramBuilder()
         self.control_plant = make_control_plant(directives)
@@ -316,11 +324,24 @@ class EndEffectorController(Diagram):
             7, config.limiter_period, config.limiter_bandwidth, limits.QD_MAX, limits.QDD_MAX,
             limits.QDDD_MAX, config.diff_ik_period, update_period=update_period, initial=q_home))
         builder.Connect(self._diff_ik.GetOutputPort("joint_positions"), self._limiter.get_input_port())
-        builder.ExportInput(self._diff_ik.GetInputPort("X_AE_desired"), "X_WE_desired")
         # Optional: the arm's measured state [q, v] (14); connected, Drake's integrator starts at
         # its q in an initialization event (it still integrates open loop afterwards).
         builder.ExportInput(self._diff_ik.GetInputPort("robot_state"), "robot_state")
-        builder.ExportOutput(self._limiter.GetOutputPort("state"), "panda_state_desired")
+        builder.ExportInput(self._diff_ik.GetInputPort("X_AE_desired"), "X_WE_desired")
+        self.force_limit = None
+        state = self._limiter.GetOutputPort("state")
+        if config.force_limit.enabled:
+            from drake_skill.station.force_limit import ForceLimit
+            if reflex is None:
+                raise ValueError("controller.force_limit.enabled needs the scenario's reflex limits "
+                                 "(EndEffectorController(..., reflex=scenario.reflex))")
+            self.force_limit = builder.AddNamedSystem("force_limit", ForceLimit(
+                plant, config.force_limit, reflex, update_period or config.limiter_period))
+            builder.Connect(state, self.force_limit.GetInputPort("panda_state_desired"))
+            builder.ExportInput(self.force_limit.GetInputPort("reflex_state"), "reflex_state")
+            builder.ConnectInput("robot_state", self.force_limit.GetInputPort("robot_state"))
+            state = self.force_limit.GetOutputPort("panda_state_commanded")
+        builder.ExportOutput(state, "panda_state_desired")
         builder.ExportOutput(self._limiter.GetOutputPort("acceleration"), "joint_acceleration_commanded")
         builder.BuildInto(self)
         self._q_home = q_home

@@ -36,12 +36,16 @@ from typing import NamedTuple
 import numpy as np
 from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 
-__all__ = ["ReflexMonitor", "ReflexTrip", "RobotSceneContactForce", "add_reflex_monitor", "reflex_filter_step"]
+__all__ = ["FILTERED_FORCE", "FILTERED_TORQUE", "REFLEX_STATE_SIZE", "ReflexMonitor", "ReflexTrip",
+           "RobotSceneContactForce", "add_reflex_monitor", "reflex_filter_step"]
 
 N_JOINTS = 7
 # Discrete state layout: [f_hat, tau_hat (7), time of the last update, peak f_hat].
 _F, _TAU, _T, _PEAK = 0, slice(1, 1 + N_JOINTS), 1 + N_JOINTS, 2 + N_JOINTS
 _STATE_SIZE = 3 + N_JOINTS
+#: The ``reflex_state`` layout for readers of the station's port: its size, the filtered
+#: contact force's index and the filtered external torques' slice.
+REFLEX_STATE_SIZE, FILTERED_FORCE, FILTERED_TORQUE = _STATE_SIZE, _F, _TAU
 # Parameter layout: [enabled, contact_force_max, filter_time, external_torque_max (7)].
 _PARAM_SIZE = 3 + N_JOINTS
 

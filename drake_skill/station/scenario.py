@@ -201,6 +201,30 @@ def default_plant() -> MultibodyPlantConfig:
 
 
 @dc.dataclass
+class ForceLimitConfig:
+    """The hand yields before the collision reflex trips (``drake_skill.station.force_limit``).
+
+    enabled: off, the commanded hand pose passes unchanged (the thesis's
+      station, and every run stored before this option existed).
+    start: the fraction of the reflex's limits (its filtered contact force
+      against ``reflex.contact_force_max``, each external joint torque against
+      ``reflex.external_torque_max``) where the hand starts to yield.
+    gain: the hand's yielding speed per unit of that fraction above ``start``
+      [m/s] (1: at 80 % of the limit with start 0.6 the hand backs off at 0.2 m/s;
+      a hand pressed into a closed lid at 3 cm/s then holds 19 N).
+    relax_time: time constant of the return to the commanded pose once the
+      measured load is below ``start`` [s].
+    max_offset: the largest distance the hand yields from the commanded pose [m].
+    """
+
+    enabled: bool = False
+    start: float = 0.6
+    gain: float = 1.0
+    relax_time: float = 1.0
+    max_offset: float = 0.05
+
+
+@dc.dataclass
 class ControllerConfig:
     """End-effector controller (differential IK), rate limiter and joint impedance gains.
 
@@ -217,6 +241,7 @@ class ControllerConfig:
     finger_kp, finger_kd: the same for the two prismatic fingers [N/m, N s/m].
     joint_centering_gain: pull of the redundant joint motion toward q_home
       [1/s] (differential IK's secondary objective).
+    force_limit: :class:`ForceLimitConfig` (off by default).
     """
 
     diff_ik_period: float = 0.01
@@ -229,6 +254,7 @@ class ControllerConfig:
     finger_kp: float = 2000.0
     finger_kd: float = 40.0
     joint_centering_gain: float = 1.0
+    force_limit: ForceLimitConfig = dc.field(default_factory=ForceLimitConfig)
 
 
 @dc.dataclass
@@ -420,6 +446,11 @@ def validate_scenario(config: Scenario) -> Scenario:
     _number("controller.velocity_scale", ctrl.velocity_scale, 0.0, 1.0, lo_open=True, what="a fraction")
     _number("controller.ee_speed_max", ctrl.ee_speed_max, 0.0, 2.0, lo_open=True, what="a speed [m/s]")
     _number("controller.joint_centering_gain", ctrl.joint_centering_gain, 0.0, 100.0, what="a gain [1/s]")
+    fl = ctrl.force_limit
+    _number("controller.force_limit.start", fl.start, 0.0, 1.0, lo_open=True, what="a fraction of the reflex's limits")
+    _number("controller.force_limit.gain", fl.gain, 0.0, 10.0, lo_open=True, what="a speed per fraction [m/s]")
+    _number("controller.force_limit.relax_time", fl.relax_time, 0.0, 100.0, lo_open=True, what="a time [s]")
+    _number("controller.force_limit.max_offset", fl.max_offset, 0.0, 0.5, lo_open=True, what="a distance [m]")
     _number("controller.diff_ik_period", ctrl.diff_ik_period, max(config.time_step, 1e-3), 0.1,
             what="a period at least the plant step [s]")
     _number("controller.limiter_period", ctrl.limiter_period, 1e-4, ctrl.diff_ik_period, what="a period [s]")

@@ -178,7 +178,7 @@ class HardwareStation(Diagram):
         clip = builder.AddNamedSystem("workspace_clip", WorkspaceClip(ws.lower, ws.upper))
         builder.ExportInput(clip.get_input_port(), "ee_pose_desired")
         controller = builder.AddNamedSystem("ee_controller", EndEffectorController(
-            config.controller, config.q_home, directives=config.directives))
+            config.controller, config.q_home, directives=config.directives, reflex=config.reflex))
         self.ee_controller = controller
         builder.Connect(clip.get_output_port(), controller.GetInputPort("X_WE_desired"))
         q_only = builder.AddNamedSystem("q_commanded", Selector(2 * N_JOINTS, N_JOINTS))
@@ -222,6 +222,9 @@ class HardwareStation(Diagram):
         self.reflex_monitor = add_reflex_monitor(builder, zero_force.get_output_port(),
                                                  receiver.get_torque_external_output_port(),
                                                  self.config.reflex, STATUS_CHECK_PERIOD)
+        if controller.force_limit is not None:   # the hand yields on the torques the robot measures
+            builder.Connect(self.reflex_monitor.GetOutputPort("filtered"), controller.GetInputPort("reflex_state"))
+            builder.Connect(state.get_output_port(), controller.GetInputPort("robot_state"))
         builder.ExportOutput(controller.GetOutputPort("joint_acceleration_commanded"),
                              "joint_acceleration_commanded")
         self.placed_pose = builder.AddNamedSystem("placed_object_pose", PlacedObjectPose())

@@ -290,6 +290,9 @@ class Station(Diagram):
         self.reflex_monitor = add_reflex_monitor(builder, contact_force.get_output_port(),
                                                  plant.get_generalized_contact_forces_output_port(arm),
                                                  config.reflex, config.time_step)
+        if self.ee_controller is not None and self.ee_controller.HasInputPort("reflex_state"):
+            builder.Connect(self.reflex_monitor.GetOutputPort("filtered"),
+                            self.ee_controller.GetInputPort("reflex_state"))
 
         if config.enable_camera:
             self._add_camera(builder)
@@ -320,7 +323,8 @@ class Station(Diagram):
             builder.ExportInput(set_points.get_input_port(), "panda_state_desired")
             return None
         controller = builder.AddNamedSystem("ee_controller", EndEffectorController(
-            config.controller, np.asarray(config.q_home, dtype=float), config.time_step, config.directives))
+            config.controller, np.asarray(config.q_home, dtype=float), config.time_step, config.directives,
+            reflex=config.reflex))
         builder.Connect(controller.GetOutputPort("panda_state_desired"), desired)
         # The IK's integrator starts where the arm is, in an initialization event.
         builder.Connect(scene.plant.get_state_output_port(scene.panda), controller.GetInputPort("robot_state"))
