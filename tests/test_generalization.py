@@ -57,7 +57,7 @@ def test_the_report_pools_each_skills_rollouts_and_marks_the_criteria(tmp_path):
                                                                                     ("turn", "0")]
     assert [r["held_out_after"] for r in rows] == ["1", "0.8", "0.4"] and rows[1]["wall_s"] == "120"
     readme = (out / "README.md").read_text()
-    assert "| lift | 2 | - | 1.00 | 0.25 | 0.00 | 0.6 | 1.0, 0.8 | 0.06 | 16 | 3 of 4 |" in readme
+    assert "| lift | 2 | - | - | 1.00 | 0.25 | 0.00 | 0.6 | 1.0, 0.8 | 0.06 | 0, 0 | 16 | 3 of 4 |" in readme
     assert readme.startswith("# Generalization: learning on every skill with `drake-skill learn`'s defaults")
     # A study of the span (grid.json says so) names it.
     (out / "grid.json").write_text(json.dumps({"exploration": "span"}))
@@ -69,6 +69,20 @@ def test_the_report_pools_each_skills_rollouts_and_marks_the_criteria(tmp_path):
     for skill in ("lift", "turn"):
         for figure in ("held_out", "return_vs_state"):
             assert (out / f"{skill}_{figure}.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_greedy_drops_count_failures_after_a_success(tmp_path):
+    def greedy(episode, success, failed=False):
+        return {"type": "greedy", "episode": episode, "success": success, "failed": failed}
+
+    # Episodes 0..5 (stored out of order): F S F S S F -> two drops; a reflex (failed) counts as one.
+    _store(tmp_path, "lift", 0, 1.0, [greedy(3, True), greedy(0, False), greedy(1, True), greedy(2, False),
+                                      greedy(4, True), greedy(5, False, failed=True)])
+    _store(tmp_path, "lift", 1, 1.0, [greedy(0, False), greedy(1, False), greedy(2, True), greedy(3, True)])
+    (tmp_path / "lift" / "held_out_before.json").write_text(json.dumps({"success_rate": 0.5}))
+    write_report(tmp_path, {"lift": {"above": 0.35, "below": None}})
+    assert json.loads((tmp_path / "summary.json").read_text())["skills"]["lift"]["greedy_drops"] == [2, 0]
+    assert [r["greedy_drops"] for r in csv.DictReader((tmp_path / "table.csv").open())] == ["2", "0"]
 
 
 def test_the_study_runs_learns_defaults_on_every_shipped_skill(capsys):

@@ -38,7 +38,7 @@ DEFAULT_OUT = Path("docs") / "results" / "generalization"
 
 #: ``table.csv``'s columns: one row per skill and seed.
 COLUMNS = ("skill", "seed", "held_out_before", "held_out_after", "reward_auc", "verdict_fpr", "verdict_fnr",
-           "reflex_rate", "rollouts", "selected_episode", "wall_s")
+           "reflex_rate", "greedy_drops", "rollouts", "selected_episode", "wall_s")
 
 #: The issue's bar for every skill (not loosened here: the report marks each as met or not).
 CRITERIA = {"reward_auc": 0.95, "mean_after": 0.9, "worst_after": 0.8, "max_drop": 0.1, "reflex_rate": 0.05}
@@ -73,16 +73,31 @@ def _runs(out: Path) -> dict[str, list[tuple[Path, dict]]]:
     return runs
 
 
+def greedy_drops(run_folder: Path) -> int:
+    """How often a run's greedy execution (one per episode, each on its own pose) failed by the
+    ground truth after an earlier one had succeeded: issue 45's "greedy executions do not
+    oscillate", counted."""
+    lines = (run_folder / "results.jsonl").read_text().splitlines() if (run_folder / "results.jsonl").is_file() else []
+    greedy = sorted((r for r in map(json.loads, lines) if r.get("type") == "greedy"), key=lambda r: r["episode"])
+    drops, succeeded = 0, False
+    for record in greedy:
+        ok = bool(record.get("success")) and not record.get("failed")
+        drops += succeeded and not ok
+        succeeded = succeeded or ok
+    return drops
+
+
 def run_rows(out: Path) -> list[dict]:
     """``table.csv``'s rows: one per stored run, skills by name, then seed."""
     rows = []
     for skill, runs in sorted(_runs(out).items()):
         before = held_out_before(out, skill)
-        for _, s in runs:
+        for folder, s in runs:
             rows.append({"skill": skill, "seed": int(s["seed"]), "held_out_before": before,
                          "held_out_after": s.get("held_out_after"), "reward_auc": s.get("reward_auc"),
                          "verdict_fpr": s.get("verdict_fpr"), "verdict_fnr": s.get("verdict_fnr"),
-                         "reflex_rate": s.get("reflex_rate"), "rollouts": int(s["n_rollouts"]),
+                         "reflex_rate": s.get("reflex_rate"), "greedy_drops": greedy_drops(folder),
+                         "rollouts": int(s["n_rollouts"]),
                          "selected_episode": s.get("selected_episode"), "wall_s": s.get("wall_s")})
     return rows
 
@@ -96,7 +111,8 @@ def _skill_figures(out: Path, skill: str, runs, rule) -> dict:
     before = held_out_before(out, skill)
     entry = {**{k: quality[k] for k in SUMMARY_KEYS}, "held_out_before": [before for _ in runs],
              "held_out_after": [s.get("held_out_after") for _, s in runs], "reflex_rate": reflex_rate(rollouts),
-             "rollouts": len(rollouts), "seeds": [int(s["seed"]) for _, s in runs]}
+             "rollouts": len(rollouts), "seeds": [int(s["seed"]) for _, s in runs],
+             "greedy_drops": [greedy_drops(folder) for folder, _ in runs]}
     runs_text = f"{len(runs)} run" + ("" if len(runs) == 1 else "s")
     plot_return_vs_state(rollouts, rule, out / f"{skill}_return_vs_state.png",
                          title=f"{skill}: learned return of every rollout, {runs_text}")
@@ -166,18 +182,20 @@ def readme_text(summary: dict, rows, exploration: str = "basis") -> str:
              "(the skill file's: `states`, thesis Eq. 4.4, or `progress`, docs/method.md 4.4), "
              "5 x 6 rollouts, tolerance fit, guarded selection (docs/method.md 5.1), 10 held-out poses.",
              f"Code: {summary['code']}.", "",
-             "| skill | seeds | reward | reward AUC | verdict FPR | verdict FNR | held-out before "
-             "| held-out after (per seed) | reflex rate | rollouts | criteria met |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| skill | seeds | reward | force limit | reward AUC | verdict FPR | verdict FNR | held-out before "
+             "| held-out after (per seed) | reflex rate | greedy drops (per seed) | rollouts | criteria met |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for skill, e in summary["skills"].items():
         marks = verdicts(e)
         met = sum(v is True for v in marks.values())
         after = ", ".join(_fmt(v, ".1f") for v in e["held_out_after"])
         before = _fmt(e["held_out_before"][0] if e["held_out_before"] else None, ".1f")
-        lines.append(f"| {skill} | {len(e['seeds'])} | {e.get('reward') or '-'} | {_fmt(e['reward_auc'])} | "
+        limit = {True: "on", False: "off"}.get(e.get("force_limit"), "-")
+        drops = ", ".join(str(v) for v in e.get("greedy_drops", [])) or "-"
+        lines.append(f"| {skill} | {len(e['seeds'])} | {e.get('reward') or '-'} | {limit} | {_fmt(e['reward_auc'])} | "
                      f"{_fmt(e['verdict_fpr'])} | "
-                     f"{_fmt(e['verdict_fnr'])} | {before} | {after} | {e['reflex_rate']:.2f} | {e['rollouts']} | "
-                     f"{met} of {len(marks)} |")
+                     f"{_fmt(e['verdict_fnr'])} | {before} | {after} | {e['reflex_rate']:.2f} | {drops} | "
+                     f"{e['rollouts']} | {met} of {len(marks)} |")
     lines += ["", "## Criteria per skill (issue 45, Must show)", ""]
     for skill, e in summary["skills"].items():
         marks = verdicts(e)
@@ -188,10 +206,26 @@ def readme_text(summary: dict, rows, exploration: str = "basis") -> str:
     if wall:
         lines += ["", f"Wall time per run (one worker inside, two runs at a time on two cores): median "
                       f"{float(np.median(wall)):.0f} s, {min(wall):.0f}-{max(wall):.0f} s."]
+    lines += ["", "Force limit: the station's `controller.force_limit` (docs/method.md 5.3) as the runs stored "
+                  "it. Greedy drops: the greedy executions (one per episode, each on its own pose) that failed "
+                  "by the ground truth after an earlier one had succeeded."]
     lines += ["", "Figures: `SKILL_held_out.png` (held-out success before and after, per seed), "
                   "`SKILL_return_vs_state.png` (the learned return of every rollout against the object's "
                   "final state; colour the ground truth, fill the verdict)."]
     return "\n".join(lines) + "\n"
+
+
+def _force_limit(out: Path, skill: str) -> bool | None:
+    """Whether the skill's stored station had ``controller.force_limit`` on (grid.json; None: unknown)."""
+    path = out / "grid.json"
+    station = load_json(path, "").get("skills", {}).get(skill, {}).get("station") if path.is_file() else None
+    if not isinstance(station, str):
+        return None
+    from pydrake.common.yaml import yaml_load_typed
+
+    from drake_skill.station.scenario import Scenario
+
+    return bool(yaml_load_typed(schema=Scenario, data=station, defaults=Scenario()).controller.force_limit.enabled)
 
 
 def _exploration(out: Path) -> str:
@@ -221,6 +255,7 @@ def write_report(out, rules: dict | None = None) -> list[Path]:
         skills[skill] = _skill_figures(out, skill, skill_runs, rule)
         # The learned reward the runs used (docs/method.md 4.4): the fitted skill's.
         skills[skill]["reward"] = None if fitted is None else fitted.pomrp.reward_kind
+        skills[skill]["force_limit"] = _force_limit(out, skill)
     rows = run_rows(out)
     summary = {"code": _code(runs), "skills": skills}
     paths = [atomic_write_text(out / "table.csv", _table_text(rows)),
