@@ -6,6 +6,7 @@ background thread, in real time), except the last test, which runs the robot
 in a second process inside a network namespace of its own.
 """
 
+import contextlib
 import copy
 from dataclasses import replace as dc_replace
 import json
@@ -388,12 +389,14 @@ def test_jump_is_rate_limited_clipped_and_stale_status_stops_the_station():
     assert abs(commands[-1].utime - time.time() * 1e6) < 5e6
 
 
-def test_pressing_into_the_table_trips_the_shared_reflex():
-    """The reflex monitor of simulation, shared by the hardware station (advanced as every run is,
-    by advance_station), decides the reflex on the robot from the driver's external joint torques."""
-
+@contextlib.contextmanager
+def _pressing_into_the_table(force_limit: bool, z_end: float, duration: float):
+    """The hardware station, with the simulated robot over in-process LCM, commanded from the home
+    pose straight down to the TCP at ``z_end`` [m] over ``duration`` [s] (after 0.2 s at rest),
+    initialized; yields (config, station, context, simulator)."""
     hardware_config = _hardware_config(_scenario("open"))
     hardware_config.driver.workspace.lower[2] = -0.3          # let the command go below the table top
+    hardware_config.controller.force_limit.enabled = force_limit
     lcm = DrakeLcm("memq://")
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
     station, source, context, simulator = _harness(hardware_config, lcm)
@@ -401,14 +404,21 @@ def test_pressing_into_the_table_trips_the_shared_reflex():
     try:
         station.reset(context)
         X0 = station.GetOutputPort("ee_pose").Eval(station.GetMyContextFromRoot(context))
-        down = RigidTransform(X0.rotation(), X0.translation() * [1.0, 1.0, 0.0] - [0.0, 0.0, 0.2])
+        down = RigidTransform(X0.rotation(), X0.translation() * [1.0, 1.0, 0.0] + [0.0, 0.0, z_end])
         source.set_plan(source.GetMyMutableContextFromRoot(context),
-                        PosePlan.from_poses([0.0, 0.2, 2.2], [X0, X0, down], [0.0] * 3))
+                        PosePlan.from_poses([0.0, 0.2, 0.2 + duration], [X0, X0, down], [0.0] * 3))
         simulator.Initialize()
-        with pytest.raises(ReflexError, match="torque joint") as reflex:
-            advance_station(simulator, station, context, 4.0)
+        yield hardware_config, station, context, simulator
     finally:
         robot.stop()
+
+
+def test_pressing_into_the_table_trips_the_shared_reflex():
+    """The reflex monitor of simulation, shared by the hardware station (advanced as every run is,
+    by advance_station), decides the reflex on the robot from the driver's external joint torques."""
+    with _pressing_into_the_table(False, -0.2, 2.0) as (hardware_config, station, context, simulator):
+        with pytest.raises(ReflexError, match="torque joint") as reflex:
+            advance_station(simulator, station, context, 4.0)
     limit = np.asarray(hardware_config.reflex.external_torque_max)
     assert np.any(np.abs(reflex.value.torque_Nm) > limit)
     assert 0.2 < reflex.value.time_s < 4.0
@@ -668,32 +678,20 @@ def test_one_factory_builds_each_driver_and_every_port_carries_what_its_name_say
         make_station(config, hardware=True)
 
 
-def test_the_force_limit_yields_on_the_torques_the_robot_measures():
+@pytest.mark.parametrize("force_limit", [False, True])
+def test_the_force_limit_yields_on_the_torques_the_robot_measures(force_limit):
     """With ``controller.force_limit`` on, the hardware station's controller gives way on the
-    driver's external joint torques (the robot measures no contact force): a press 3 cm into
-    the table at 5 cm/s ends with the reflex untripped and the hand above the command."""
-    hardware_config = _hardware_config(_scenario("open"))
-    hardware_config.driver.workspace.lower[2] = -0.3
-    hardware_config.controller.force_limit.enabled = True
-    lcm = DrakeLcm("memq://")
-    robot = SimRobot(hardware_config, lcm=lcm, pump=False)
-    station, source, context, simulator = _harness(hardware_config, lcm)
-    assert station.ee_controller.force_limit is not None
-    robot.start()
-    try:
-        station.reset(context)
-        X0 = station.GetOutputPort("ee_pose").Eval(station.GetMyContextFromRoot(context))
-        # The fingertips touch the table top with the TCP at z = 9 mm; commanded to z = -21 mm.
-        down = RigidTransform(X0.rotation(), X0.translation() * [1.0, 1.0, 0.0] - [0.0, 0.0, 0.021])
-        source.set_plan(source.GetMyMutableContextFromRoot(context),
-                        PosePlan.from_poses([0.0, 0.2, 6.2], [X0, X0, down], [0.0] * 3))
-        simulator.Initialize()
-        advance_station(simulator, station, context, 7.0)
-        station_context = station.GetMyContextFromRoot(context)
-        z = station.GetOutputPort("ee_pose").Eval(station_context).translation()[2]
-        tau = station.GetOutputPort("reflex_state").Eval(station_context)[1:8]
-    finally:
-        robot.stop()
-    limit = np.asarray(hardware_config.reflex.external_torque_max)
-    assert np.max(np.abs(tau) / limit) > hardware_config.controller.force_limit.start - 0.1   # it pressed
-    assert z > -0.021 + 0.02
+    driver's external joint torques (the robot measures no contact force): a press 3 cm into the
+    table at 3 mm/s (slow: the loop closes over LCM through the robot's thread, in real time) ends
+    with the reflex untripped, the load past the limit's start; off, the same press trips it."""
+    # The fingertips touch the table top with the TCP at z = 9 mm; commanded to z = -21 mm.
+    with _pressing_into_the_table(force_limit, -0.021, 10.0) as (config, station, context, simulator):
+        if not force_limit:
+            with pytest.raises(ReflexError, match="torque joint"):
+                advance_station(simulator, station, context, 10.5)
+            return
+        assert station.ee_controller.force_limit is not None
+        advance_station(simulator, station, context, 10.5)
+        tau = station.GetOutputPort("reflex_state").Eval(station.GetMyContextFromRoot(context))[1:8]
+    load = np.max(np.abs(tau) / np.asarray(config.reflex.external_torque_max))
+    assert config.controller.force_limit.start - 0.1 < load < 1.0
