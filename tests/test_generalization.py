@@ -85,7 +85,7 @@ def test_greedy_drops_count_failures_after_a_success(tmp_path):
     assert [r["greedy_drops"] for r in csv.DictReader((tmp_path / "table.csv").open())] == ["2", "0"]
 
 
-def test_the_study_runs_learns_defaults_on_every_shipped_skill(capsys):
+def test_the_study_runs_learns_defaults_on_every_shipped_skill(capsys, tmp_path):
     from drake_skill.skills import shipped_skill_names
 
     config = generalization_config().validate()
@@ -103,6 +103,10 @@ def test_the_study_runs_learns_defaults_on_every_shipped_skill(capsys):
         generalization_config(exploration="wide").validate()
     assert main(["experiment", "generalization", "--out", "/dev/null/x", "--report-only"]) == 2
     assert "--out" in capsys.readouterr().err
+    assert main(["experiment", "generalization", "--scenario", "/nonexistent/limit.yaml", "--out",
+                 str(tmp_path / "study")]) == 2
+    err = capsys.readouterr().err
+    assert "--scenario /nonexistent/limit.yaml" in err and len(err.strip().splitlines()) == 1
 
 
 def test_fit_refuses_demonstrations_that_never_meet_the_skills_rule(tmp_path_factory, tmp_path, capsys):

@@ -6,7 +6,7 @@
                                [--out results/experiment]
     drake-skill experiment report OUT [--table FILE] [--report-dir DIR]
     drake-skill experiment generalization [--skills ...] [--runs 5] [--workers N] [--exploration basis|span]
-                                          [--out docs/results/generalization]
+                                          [--scenario FILE] [--out docs/results/generalization]
 
 ``run``: for each skill the scripted demonstrations are recorded and the
 skill fitted once (``OUT/SKILL/initial_skill``, reused when there); its
@@ -76,6 +76,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     general.add_argument("--exploration", choices=("basis", "span"), default="basis",
                          help="what each run's search varies, as learn --exploration (default basis; span "
                               "writes the same study for the demonstrations' span, docs/method.md 5.2)")
+    general.add_argument("--scenario", dest="station_config", type=Path, default=None, metavar="FILE",
+                         help="scenario YAML over each skill's scenario, as learn --scenario (e.g. "
+                              "'controller: {force_limit: {enabled: true}}'; stored with the runs)")
     general.add_argument("--out", type=Path, default=Path("docs") / "results" / "generalization",
                          help="the study's folder (default docs/results/generalization)")
     general.add_argument("--report-only", action="store_true", help="rewrite the report from the stored runs only")
@@ -173,9 +176,13 @@ def _generalization(args) -> int:
     errors.output_folder(args.out, "--out", what="the generalization study")
     failed = []
     if not args.report_only:
+        if args.station_config is not None:
+            from drake_skill.inputs import input_file
+            input_file(args.station_config, "--scenario",
+                       "a station scenario YAML file (see drake_skill/station/scenarios/)")
         config = generalization_config(args.skills, args.runs, args.exploration)
         outcome = run_grid(args.out, config, rollout_config=RolloutConfig(), workers=args.workers,
-                           progress=not args.quiet, quiet=args.quiet)
+                           station_yaml=args.station_config, progress=not args.quiet, quiet=args.quiet)
         print(f"{outcome.ran} run(s) finished in {outcome.wall_s:.0f} s on {outcome.workers} worker(s); "
               f"{outcome.stored} stored in {args.out}")
         failed = outcome.failed
