@@ -324,10 +324,10 @@ class EndEffectorController(Diagram):
             7, config.limiter_period, config.limiter_bandwidth, limits.QD_MAX, limits.QDD_MAX,
             limits.QDDD_MAX, config.diff_ik_period, update_period=update_period, initial=q_home))
         builder.Connect(self._diff_ik.GetOutputPort("joint_positions"), self._limiter.get_input_port())
+        builder.ExportInput(self._diff_ik.GetInputPort("X_AE_desired"), "X_WE_desired")
         # Optional: the arm's measured state [q, v] (14); connected, Drake's integrator starts at
         # its q in an initialization event (it still integrates open loop afterwards).
         builder.ExportInput(self._diff_ik.GetInputPort("robot_state"), "robot_state")
-        builder.ExportInput(self._diff_ik.GetInputPort("X_AE_desired"), "X_WE_desired")
         self.force_limit = None
         state = self._limiter.GetOutputPort("state")
         if config.force_limit.enabled:
