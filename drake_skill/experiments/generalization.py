@@ -56,9 +56,14 @@ def generalization_config(skills=None, runs: int = 5, exploration: str = "basis"
                       runs=int(runs), fit="tolerance", select="guarded", exploration=exploration)
 
 
-def _rollouts(run_folder: Path) -> list[dict]:
+def _records(run_folder: Path, kind: str) -> list[dict]:
+    """The run's ``results.jsonl`` records of type ``kind`` ("rollout", "greedy"), in file order."""
     lines = (run_folder / "results.jsonl").read_text().splitlines() if (run_folder / "results.jsonl").is_file() else []
-    return [r for r in map(json.loads, lines) if r.get("type") == "rollout"]
+    return [r for r in map(json.loads, lines) if r.get("type") == kind]
+
+
+def _rollouts(run_folder: Path) -> list[dict]:
+    return _records(run_folder, "rollout")
 
 
 def _runs(out: Path) -> dict[str, list[tuple[Path, dict]]]:
@@ -77,8 +82,7 @@ def greedy_drops(run_folder: Path) -> int:
     """How often a run's greedy execution (one per episode, each on its own pose) failed by the
     ground truth after an earlier one had succeeded: issue 45's "greedy executions do not
     oscillate", counted."""
-    lines = (run_folder / "results.jsonl").read_text().splitlines() if (run_folder / "results.jsonl").is_file() else []
-    greedy = sorted((r for r in map(json.loads, lines) if r.get("type") == "greedy"), key=lambda r: r["episode"])
+    greedy = sorted(_records(run_folder, "greedy"), key=lambda r: r["episode"])
     drops, succeeded = 0, False
     for record in greedy:
         ok = bool(record.get("success")) and not record.get("failed")

@@ -290,7 +290,7 @@ class Station(Diagram):
         self.reflex_monitor = add_reflex_monitor(builder, contact_force.get_output_port(),
                                                  plant.get_generalized_contact_forces_output_port(arm),
                                                  config.reflex, config.time_step)
-        if self.ee_controller is not None and self.ee_controller.HasInputPort("reflex_state"):
+        if self.ee_controller is not None and self.ee_controller.force_limit is not None:
             builder.Connect(self.reflex_monitor.GetOutputPort("filtered"),
                             self.ee_controller.GetInputPort("reflex_state"))
 
