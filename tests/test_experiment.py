@@ -258,6 +258,31 @@ def test_a_grid_prepares_a_skill_on_the_skill_s_scenario_under_its_scenario_file
     assert prepare_config("draw").station_for(spec).object.x == 0.68
 
 
+def test_the_thesis_grid_runs_without_the_force_limit_that_the_skills_scenarios_turn_on(tmp_path):
+    """The shipped scenarios give way before the reflex (docs/method.md 5.3); the chapter-7 grid
+    (``GridConfig.station`` "thesis", its default) lays THESIS_STATION under ``--scenario``, so it
+    runs the thesis's station, while the generalization study runs each skill's as ``learn`` does.
+    A ``--scenario`` file still reaches the thesis station, and a station stored by older code,
+    which today's schema cannot read, is a different station (not a traceback)."""
+    from drake_skill.experiments.generalization import generalization_config
+    from drake_skill.experiments.grid import GridConfig, grid_station
+    from drake_skill.inputs import scenario
+    from drake_skill.station.scenario import dump_scenario, same_station
+
+    assert (GridConfig().station, generalization_config(["open"]).station) == ("thesis", "skill")
+    for skill in ("open", "close", "draw"):
+        assert scenario(skill).controller.force_limit.enabled
+        assert not grid_station(skill).controller.force_limit.enabled
+        assert grid_station(skill, thesis_station=False).controller.force_limit.enabled
+    (tmp_path / "near.yaml").write_text("object: {x: 0.62}\n")
+    near = grid_station("draw", tmp_path / "near.yaml")
+    assert (near.object.x, near.controller.force_limit.enabled) == (0.62, False)
+    old = dump_scenario(grid_station("open")).replace("object:\n", "object:\n  kind: box\n", 1)
+    assert not same_station(old, dump_scenario(grid_station("open")))
+    with pytest.raises(ValueError, match="station 'robot': unknown; give thesis or skill"):
+        GridConfig(station="robot").validate()
+
+
 
 
 def test_an_unreachable_ray_address_is_one_line_within_seconds(tmp_path, capsys):

@@ -53,7 +53,7 @@ def generalization_config(skills=None, runs: int = 5, exploration: str = "basis"
     from drake_skill.skills import shipped_skill_names
 
     return GridConfig(skills=tuple(skills or shipped_skill_names()), methods=(METHOD,), rewards=(REWARD,),
-                      runs=int(runs), fit="tolerance", select="guarded", exploration=exploration)
+                      runs=int(runs), fit="tolerance", select="guarded", exploration=exploration, station="skill")
 
 
 def _records(run_folder: Path, kind: str) -> list[dict]:

@@ -45,11 +45,15 @@ from drake_skill.learning.exploration import EXPLORATIONS
 from drake_skill.learning.loop import REWARDS, LearnConfig
 from drake_skill.learning.policy_search import METHODS
 
-__all__ = ["DEFAULT_RUNS", "GridConfig", "GridOutcome", "GridTask", "before_path", "execute_task",
-           "plan_tasks", "prepare_skills", "run_dir", "run_grid"]
+__all__ = ["DEFAULT_RUNS", "THESIS_STATION", "GridConfig", "GridOutcome", "GridTask", "before_path", "execute_task",
+           "grid_station", "plan_tasks", "prepare_skills", "run_dir", "run_grid"]
 
 #: Independent runs per cell (the thesis's 20).
 DEFAULT_RUNS = 20
+
+#: The chapter-7 station laid over every skill's scenario (``GridConfig.station`` "thesis"): the
+#: thesis's robot has no force limit (docs/method.md 5.3), which the shipped scenarios turn on.
+THESIS_STATION = "controller: {force_limit: {enabled: false}}"
 
 _GRID_FORMAT = 1
 
@@ -107,6 +111,10 @@ class GridConfig:
       generalization study). Stored in ``grid.json`` when not "last".
     exploration: what each run's search varies (``LearnConfig.exploration``, docs/method.md 5.2):
       "basis" (the default, thesis Eq. 5.3) or "span". Stored in ``grid.json`` when not "basis".
+    station: "thesis" (the default: the chapter-7 station, each skill's scenario with
+      :data:`THESIS_STATION` laid under ``--scenario``: no force limit, as the committed grid
+      ran) or "skill" (each skill's scenario as ``learn`` builds it; the generalization study).
+      It reaches ``grid.json`` through the station each skill stores there.
     """
 
     skills: tuple[str, ...] = ("open", "close")
@@ -122,6 +130,7 @@ class GridConfig:
     fit: str = "thesis"
     select: str = "last"
     exploration: str = "basis"
+    station: str = "thesis"
     sources: dict[str, str] = dc.field(default_factory=dict)
 
     def validate(self) -> "GridConfig":
@@ -138,6 +147,8 @@ class GridConfig:
             raise ValueError(f"--select {self.select}: unknown rule; give last or guarded")
         if self.exploration not in EXPLORATIONS:
             raise ValueError(f"--exploration {self.exploration}: unknown; give {' or '.join(EXPLORATIONS)}")
+        if self.station not in ("thesis", "skill"):
+            raise ValueError(f"station {self.station!r}: unknown; give thesis or skill")
         if self.fit not in ("thesis", "tolerance"):
             raise ValueError(f"--fit {self.fit}: unknown fit; give thesis or tolerance")
         if "cma-es" in self.methods and int(self.rollouts) < 2:
@@ -298,7 +309,8 @@ def execute_task(task: GridTask) -> dict:
 
 # ----------------------------------------------------------------------- planning
 def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None = None,
-                   station_yaml: Path | None = None, quiet: bool = False, fit: str = "thesis") -> dict[str, Path]:
+                   station_yaml: Path | None = None, quiet: bool = False, fit: str = "thesis",
+                   thesis_station: bool = True) -> dict[str, Path]:
     """Each skill's fitted skill ``OUT/SKILL/initial_skill``: recorded and fitted once
     (:func:`drake_skill.workflow.prepare.prepare_skill`, as ``drake-skill learn`` does), or copied
     from ``skill_dir`` (one skill only). ``sources``: {name: shipped name or skill file}."""
@@ -311,7 +323,7 @@ def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None
         if skill_dir is not None:
             _copy_skill(Path(skill_dir), initial, skill)
         else:
-            prepare_skill(prepare_config(source, station_yaml, quiet, fit), Path(out) / skill)
+            prepare_skill(prepare_config(source, station_yaml, quiet, fit, thesis_station), Path(out) / skill)
         if Skill.load(initial).name != skill:
             raise ValueError(f"{initial} holds a '{Skill.load(initial).name}' skill, not '{skill}'; "
                              "use another --out")
@@ -319,13 +331,22 @@ def prepare_skills(out: Path, sources: dict[str, str], *, skill_dir: Path | None
     return dirs
 
 
-def prepare_config(source: str, station_yaml: Path | None = None, quiet: bool = False, fit: str = "thesis"):
+def prepare_config(source: str, station_yaml: Path | None = None, quiet: bool = False, fit: str = "thesis",
+                   thesis_station: bool = True):
     """The :class:`~drake_skill.workflow.prepare.PrepareConfig` of ``drake-skill learn --skill SOURCE
-    [--scenario FILE] [--quiet] --fit FIT``: the skill's scenario under ``station_yaml``."""
+    [--scenario FILE] [--quiet] --fit FIT``: the skill's scenario (with :data:`THESIS_STATION` when
+    ``thesis_station``) under ``station_yaml``."""
     from drake_skill.workflow.prepare import PrepareConfig
 
-    return PrepareConfig(skill=str(source), station_for=lambda spec: scenario(spec, station_yaml), fit=fit,
-                         quiet=quiet)
+    return PrepareConfig(skill=str(source), fit=fit, quiet=quiet,
+                         station_for=lambda spec: grid_station(spec, station_yaml, thesis_station))
+
+
+def grid_station(skill, station_yaml: Path | None = None, thesis_station: bool = True):
+    """The Scenario a grid runs ``skill`` (a shipped name, skill file or spec) on: its scenario, with
+    :data:`THESIS_STATION` laid over it when ``thesis_station``, then ``station_yaml`` (``--scenario``)."""
+    base = scenario(skill, texts=[THESIS_STATION]) if thesis_station else skill
+    return scenario(base, station_yaml)
 
 
 def _copy_skill(source: Path, initial: Path, skill: str) -> None:
@@ -492,10 +513,11 @@ def _runner_specs(out: Path, config: GridConfig, skill_dir, station_yaml, rollou
 
     if skill_dir is not None and len(config.skills) != 1:
         raise ValueError(f"--skill-dir {skill_dir}: one fitted skill serves one skill; give one skill in --skills")
+    thesis = config.station == "thesis"
     dirs = prepare_skills(out, config.sources, skill_dir=skill_dir, station_yaml=station_yaml, quiet=quiet,
-                          fit=config.fit)
+                          fit=config.fit, thesis_station=thesis)
     rollout_config = (rollout_config or RolloutConfig()).validate()
-    return {s: RunnerSpec.create(dirs[s], scenario(config.sources[s], station_yaml), rollout_config)
+    return {s: RunnerSpec.create(dirs[s], grid_station(config.sources[s], station_yaml, thesis), rollout_config)
             for s in config.skills}
 
 
