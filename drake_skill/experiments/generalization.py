@@ -180,6 +180,8 @@ def readme_text(summary: dict, rows, exploration: str = "basis") -> str:
     if exploration != "basis":
         title = f"`drake-skill learn --exploration {exploration}`"
         search = f"PI^2-ES-Cov over the demonstrations' {exploration} (docs/method.md 5.2)"
+    if summary["skills"] and not any(e.get("force_limit") for e in summary["skills"].values()):
+        title += " on stations without the force limit"      # stored before the scenarios had one
     lines = [f"# Generalization: learning on every skill with {title}", "",
              "Written by `drake-skill experiment generalization` (drake_skill/experiments/generalization.py) "
              f"from the stored runs; rerun it to continue or refresh. Each run: {search}, dense learned reward "
