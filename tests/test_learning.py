@@ -312,6 +312,31 @@ def test_span_exploration_maps_blends_of_the_demonstrations_and_their_covariance
         LearnConfig(exploration="wide").validate()
 
 
+def test_approach_exploration_quiets_the_bases_before_the_demonstrations_first_contact():
+    """docs/method.md 5.4: the bases centred up to APPROACH_MARGIN_S after the first contact (centres
+    equally spaced over [0, tau]) are scaled by the factor, the rest kept; no contact or a factor of 1
+    leaves Sigma_b^0 as it is. The first contact comes back from the fit's start_join."""
+    from drake_skill.fitted_skill import START_JOIN_FRACTION
+    from drake_skill.learning.exploration import APPROACH_MARGIN_S, approach_covariance, first_contact_time
+
+    sigma0 = np.stack([np.eye(7) * (b + 1.0) for b in range(11)])          # centres 0, 1, ..., 10 s
+    quiet = approach_covariance(sigma0, 10.0, 4.0 - APPROACH_MARGIN_S + 0.5, 0.01)
+    np.testing.assert_allclose(quiet[:5], 0.01 * sigma0[:5])                # centres 0-4 s <= 4.5 s
+    np.testing.assert_array_equal(quiet[5:], sigma0[5:])
+    np.testing.assert_array_equal(approach_covariance(sigma0, 10.0, None, 0.01), sigma0)
+    np.testing.assert_array_equal(approach_covariance(sigma0, 10.0, 4.0, 1.0), sigma0)
+    skill = types.SimpleNamespace(config=types.SimpleNamespace(dmp=types.SimpleNamespace(start_join=0.3)),
+                                  dmps=[types.SimpleNamespace(tau=12.0)], initial_index=0)
+    assert first_contact_time(skill) == pytest.approx(0.3 / START_JOIN_FRACTION * 12.0)
+    skill.config.dmp.start_join = 0.0
+    assert first_contact_time(skill) is None
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="approach_exploration"):
+            LearnConfig(approach_exploration=bad).validate()
+    with pytest.raises(ValueError, match="approach_exploration.*span"):
+        LearnConfig(approach_exploration=0.1, exploration="span").validate()
+
+
 def test_a_run_exploring_the_span_returns_a_blend_of_the_demonstrations(tmp_path_factory, tmp_path):
     """``exploration: span`` (docs/method.md 5.2): every sample, and so the learned mean, lies on the line
     through the two Close demonstrations' weights; the scale defaults to 1."""

@@ -76,6 +76,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     general.add_argument("--exploration", choices=("basis", "span"), default="basis",
                          help="what each run's search varies, as learn --exploration (default basis; span "
                               "writes the same study for the demonstrations' span, docs/method.md 5.2)")
+    general.add_argument("--approach-exploration", type=float, default=1.0, metavar="F",
+                         help="as learn --approach-exploration: Sigma_0 x F on the bases before the "
+                              "demonstrations' first contact (default 1: off; docs/method.md 5.4)")
     general.add_argument("--scenario", dest="station_config", type=Path, default=None, metavar="FILE",
                          help="scenario YAML over each skill's scenario, as learn --scenario (e.g. "
                               "'controller: {force_limit: {enabled: true}}'; stored with the runs)")
@@ -180,7 +183,7 @@ def _generalization(args) -> int:
             from drake_skill.inputs import input_file
             input_file(args.station_config, "--scenario",
                        "a station scenario YAML file (see drake_skill/station/scenarios/)")
-        config = generalization_config(args.skills, args.runs, args.exploration)
+        config = generalization_config(args.skills, args.runs, args.exploration, args.approach_exploration)
         outcome = run_grid(args.out, config, rollout_config=RolloutConfig(), workers=args.workers,
                            station_yaml=args.station_config, progress=not args.quiet, quiet=args.quiet)
         print(f"{outcome.ran} run(s) finished in {outcome.wall_s:.0f} s on {outcome.workers} worker(s); "

@@ -93,6 +93,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="what the search varies: basis (thesis Eq. 5.3, default: every basis's weights from "
                              "Sigma_0) or span (blends and extrapolations of the demonstrations' DMPs; "
                              "docs/method.md 5.2)")
+    search.add_argument("--approach-exploration", type=float, default=None, metavar="F",
+                        help="a factor in (0, 1] on Sigma_0 of the bases that move the hand before the "
+                             "demonstrations first touch the object: samples keep the demonstrated approach and "
+                             "explore the contact and after (default 1: off, as the thesis; docs/method.md 5.4)")
     search.add_argument("--select-poses", type=int, default=None, metavar="N",
                         help="object poses each guarded candidate runs on (default 3)")
     run = parser.add_argument_group("run")
@@ -135,7 +139,7 @@ def _station_config(args, skill):
 
 _FILE_FLAGS = ("skill", "skill_dir", "demos", "out")
 _LEARN_FLAGS = ("method", "reward", "weighting", "episodes", "rollouts", "seed", "held_out", "exploration_scale",
-                "select", "select_poses", "exploration")
+                "select", "select_poses", "exploration", "approach_exploration")
 
 
 def _apply_config_file(args) -> None:
@@ -236,7 +240,8 @@ def run(args: argparse.Namespace) -> int:
     config = LearnConfig(method=args.method, reward=args.reward, weighting=args.weighting or "",
                          episodes=args.episodes, rollouts=args.rollouts, seed=args.seed,
                          held_out=args.held_out, exploration_scale=args.exploration_scale,
-                         select=args.select, select_poses=args.select_poses, exploration=args.exploration)
+                         select=args.select, select_poses=args.select_poses, exploration=args.exploration,
+                         approach_exploration=args.approach_exploration)
     rollout = options.rollout_config(args)
     meshcat = None
     if args.meshcat:

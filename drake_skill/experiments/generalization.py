@@ -46,14 +46,16 @@ CRITERIA = {"reward_auc": 0.95, "mean_after": 0.9, "worst_after": 0.8, "max_drop
 METHOD, REWARD = "pi2-es-cov", "dense"
 
 
-def generalization_config(skills=None, runs: int = 5, exploration: str = "basis"):
+def generalization_config(skills=None, runs: int = 5, exploration: str = "basis", approach_exploration: float = 1.0):
     """The grid of the study: ``learn``'s defaults on every skill (default: all shipped); ``exploration``
-    "span" runs the same study with ``learn --exploration span`` (docs/method.md 5.2)."""
+    "span" runs the same study with ``learn --exploration span`` (docs/method.md 5.2),
+    ``approach_exploration`` with ``learn --approach-exploration`` (5.4)."""
     from drake_skill.experiments.grid import GridConfig
     from drake_skill.skills import shipped_skill_names
 
     return GridConfig(skills=tuple(skills or shipped_skill_names()), methods=(METHOD,), rewards=(REWARD,),
-                      runs=int(runs), fit="tolerance", select="guarded", exploration=exploration, station="skill")
+                      runs=int(runs), fit="tolerance", select="guarded", exploration=exploration, station="skill",
+                      approach_exploration=float(approach_exploration))
 
 
 def _records(run_folder: Path, kind: str) -> list[dict]:
@@ -177,7 +179,10 @@ def _fmt(value, spec=".2f") -> str:
 def readme_text(summary: dict, rows, exploration: str = "basis") -> str:
     """README.md: what ran, a line per skill, the criteria marked."""
     title, search = "`drake-skill learn`'s defaults", "PI^2-ES-Cov"
-    if exploration != "basis":
+    if exploration.startswith("basis "):
+        title = f"`drake-skill learn{exploration[len('basis'):]}`"
+        search = "PI^2-ES-Cov, Sigma_b^0 quieted before the demonstrations' first contact (docs/method.md 5.4)"
+    elif exploration != "basis":
         title = f"`drake-skill learn --exploration {exploration}`"
         search = f"PI^2-ES-Cov over the demonstrations' {exploration} (docs/method.md 5.2)"
     if summary["skills"] and not any(e.get("force_limit") for e in summary["skills"].values()):
@@ -235,12 +240,14 @@ def _force_limit(out: Path, skill: str) -> bool | None:
 
 
 def _exploration(out: Path) -> str:
-    """The study's ``exploration`` (grid.json; absent: "basis")."""
+    """The study's ``exploration`` (grid.json; absent: "basis"), with ``--approach-exploration F``
+    appended when its runs had it."""
     path = out / "grid.json"
     if not path.is_file():
         return "basis"
-    return str(load_json(path, "restore it from a copy, or rerun the study into another --out")
-               .get("exploration", "basis"))
+    grid = load_json(path, "restore it from a copy, or rerun the study into another --out")
+    approach = grid.get("approach_exploration")
+    return str(grid.get("exploration", "basis")) + (f" --approach-exploration {approach:g}" if approach else "")
 
 
 def write_report(out, rules: dict | None = None) -> list[Path]:

@@ -115,6 +115,8 @@ class GridConfig:
       :data:`THESIS_STATION` laid under ``--scenario``: no force limit, as the committed grid
       ran) or "skill" (each skill's scenario as ``learn`` builds it; the generalization study).
       It reaches ``grid.json`` through the station each skill stores there.
+    approach_exploration: ``LearnConfig.approach_exploration`` of every run (1: off, the
+      thesis's). Stored in ``grid.json`` when not 1.
     """
 
     skills: tuple[str, ...] = ("open", "close")
@@ -131,6 +133,7 @@ class GridConfig:
     select: str = "last"
     exploration: str = "basis"
     station: str = "thesis"
+    approach_exploration: float = 1.0
     sources: dict[str, str] = dc.field(default_factory=dict)
 
     def validate(self) -> "GridConfig":
@@ -147,6 +150,10 @@ class GridConfig:
             raise ValueError(f"--select {self.select}: unknown rule; give last or guarded")
         if self.exploration not in EXPLORATIONS:
             raise ValueError(f"--exploration {self.exploration}: unknown; give {' or '.join(EXPLORATIONS)}")
+        approach = float(self.approach_exploration)
+        if not (0.0 < approach <= 1.0):
+            raise ValueError(f"--approach-exploration {self.approach_exploration}: expected a factor in (0, 1]; "
+                             "give 1 (off) or less")
         if self.station not in ("thesis", "skill"):
             raise ValueError(f"station {self.station!r}: unknown; give thesis or skill")
         if self.fit not in ("thesis", "tolerance"):
@@ -169,13 +176,16 @@ class GridConfig:
         every = int(self.rollouts) if method == "power" else 1
         return LearnConfig(method=method, reward=reward, episodes=episodes, rollouts=rollouts,
                            seed=int(self.seed0) + int(run), held_out=0, greedy_every=every,
-                           select=self.select, exploration=self.exploration).validate()
+                           select=self.select, exploration=self.exploration,
+                           approach_exploration=float(self.approach_exploration)).validate()
 
     def settings(self) -> dict[str, Any]:
         """What decides the numbers of a run beyond its cell (kept in ``grid.json``)."""
         fit = {} if self.fit == "thesis" else {"fit": self.fit}
         select = {} if self.select == "last" else {"select": self.select}
         exploration = {} if self.exploration == "basis" else {"exploration": self.exploration}
+        if float(self.approach_exploration) != 1.0:
+            exploration["approach_exploration"] = float(self.approach_exploration)
         return {"episodes": int(self.episodes), "rollouts": int(self.rollouts), "held_out": int(self.held_out),
                 "held_out_seed0": int(self.held_out_seed0), "seed0": int(self.seed0), **fit, **select,
                 **exploration}

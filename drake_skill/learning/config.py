@@ -63,6 +63,10 @@ class LearnConfig:
       every basis's weights around the mean, from Sigma_b^0) or "span" (blends
       and extrapolations of the demonstrations' DMPs; ``exploration_scale``
       then defaults to 1).
+    approach_exploration: a factor in (0, 1] on Sigma_b^0 of the bases that move the hand
+      before the demonstrations' first contact (docs/method.md 5.4,
+      :func:`~drake_skill.learning.exploration.approach_covariance`); 1 (the default, the
+      thesis's): none quieted. Only with ``exploration`` "basis".
     """
 
     method: str = "pi2-es-cov"
@@ -78,6 +82,7 @@ class LearnConfig:
     select: str = "guarded"
     select_poses: int = 3
     exploration: str = "basis"
+    approach_exploration: float = 1.0
 
     def validate(self) -> "LearnConfig":
         bad = functools.partial(typed_yaml.bad, "learn config")
@@ -101,6 +106,12 @@ class LearnConfig:
             bad("select", self.select, "'guarded' (never return a policy that scores below the start) or 'last'")
         if self.exploration not in EXPLORATIONS:
             bad("exploration", self.exploration, "'basis' (thesis Eq. 5.3) or 'span' (the demonstrations' span)")
+        approach = float(self.approach_exploration)
+        if not (math.isfinite(approach) and 0.0 < approach <= 1.0):
+            bad("approach_exploration", self.approach_exploration, "a factor in (0, 1] on Sigma_b^0 (1: off)")
+        if approach != 1.0 and self.exploration != "basis":
+            bad("approach_exploration", self.approach_exploration,
+                "1 with exploration span (the span has no bases to quiet), or exploration basis")
         if int(self.select_poses) < 1:
             bad("select_poses", self.select_poses, "at least 1 object pose per candidate")
         if int(self.held_out) < 0:

@@ -26,16 +26,61 @@ thesis Eq. 5.3's sigma_0). The cost: nothing outside the span can be
 learned. A skill whose success lies further along the demonstrated change
 (further open, further pushed: "at least as far as I showed") is inside it;
 a correction none of the demonstrations shows is not.
+
+``approach_exploration`` (:func:`approach_covariance`, docs/method.md 5.4)
+keeps the basis search but scales Sigma_b^0 by a factor for every basis
+that moves the hand before the demonstrations first touch the object:
+where they agree to the millimetre, the samples stay on the demonstrated
+approach, and the search explores what happens in contact and after.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["EXPLORATIONS", "SpanExploration"]
+__all__ = ["APPROACH_MARGIN_S", "EXPLORATIONS", "SpanExploration", "approach_covariance", "first_contact_time"]
 
 #: ``LearnConfig.exploration``: "basis" (thesis Eq. 5.3: Sigma_b^0 per basis) or "span" (this module).
 EXPLORATIONS = ("basis", "span")
+
+
+#: ``LearnConfig.approach_exploration`` quiets the bases centred up to this long after the
+#: demonstrations' first contact [s]: the contact mask starts CONTACT_DILATE_S (0.2 s) before the
+#: object moves, and a basis moves the hand for about its own width (0.1-0.2 s) after its centre.
+APPROACH_MARGIN_S = 0.4
+
+
+def first_contact_time(skill) -> float | None:
+    """When the demonstrations first touch the object, on the initial DMP's clock [s]: the start of
+    the earliest demonstration's contact mask (``drake_skill.action.metrics.contact_mask``: the
+    object moving, widened by 0.2 s), recovered from the fit's ``DmpConfig.start_join`` (that start
+    as a fraction of the duration, times ``START_JOIN_FRACTION``). None when the fit has none (no
+    demonstration moved the object, or the thesis fit)."""
+    from drake_skill.fitted_skill import START_JOIN_FRACTION
+
+    join = float(getattr(skill.config.dmp, "start_join", 0.0) or 0.0)
+    if join <= 0.0:
+        return None
+    return join / START_JOIN_FRACTION * float(skill.dmps[skill.initial_index].tau)
+
+
+def approach_covariance(sigma0, tau: float, first_contact: float | None, factor: float,
+                        margin: float = APPROACH_MARGIN_S) -> np.ndarray:
+    """Sigma_b^0 (B, d, d) with every basis centred at or before ``first_contact + margin`` [s]
+    scaled by ``factor`` (docs/method.md 5.4); the centres lie at t_b = b tau / (B - 1) [s]
+    (``drake_skill.action.dmp.basis_centres_widths``: equally spaced in time over [0, tau]).
+
+    The hand's position at time t integrates the forcing term of every earlier basis (the
+    transformation system's spring, sqrt(K) / tau ~ 1 rad/s, forgets slowly), so the whole
+    approach is quieted, not only the bases at the touch. ``first_contact`` None or ``factor`` 1:
+    Sigma_b^0 unchanged.
+    """
+    sigma0 = np.asarray(sigma0, dtype=float)
+    if first_contact is None or factor == 1.0:
+        return sigma0.copy()
+    centres = np.linspace(0.0, float(tau), sigma0.shape[0])
+    scale = np.where(centres <= float(first_contact) + float(margin), float(factor), 1.0)
+    return sigma0 * scale[:, None, None]
 
 
 class SpanExploration:
