@@ -246,6 +246,10 @@ def test_refinement_on_the_simulated_robot_brings_its_path_to_the_demonstration(
     hardware_config = _hardware_config(station_config)
     hardware_config.driver.status_timeout = 0.3           # two real-time simulators in one process (see above)
     hardware_config.reflex.enabled = False
+    # The refinement is under test, on a free move: the force limit (on in the shipped scenarios) has
+    # nothing to give way to, but its Python update in the real-time control loop let the simulated
+    # robot lag real time on 2 shared cores in a fresh-clone CI run (3.7 -> 4.4 mm, the plain fit kept).
+    hardware_config.controller.force_limit.enabled = False
     lcm = DrakeLcm("memq://")
     robot = SimRobot(hardware_config, lcm=lcm, pump=False)
     station = make_station(hardware_config, hardware=True, lcm=lcm)
@@ -606,6 +610,7 @@ def test_hardware_cli_against_sim_robot_in_another_process(tmp_path, tmp_path_fa
     # runs on its own real-time computer); stale status is tested in-process.
     config.driver.status_timeout = 0.5
     config.reflex.enabled = False         # as in the learning-run test: the protocol is under test
+    config.controller.force_limit.enabled = False     # (and its Python update would load the real-time loop)
     config.driver.reset_timeout = 120.0                  # record-demo waits for the robot it starts before
     (tmp_path / "hardware.yaml").write_text(yaml_dump_typed(config))
     cli = f"{sys.executable} -m drake_skill.cli.main"
@@ -691,5 +696,7 @@ def test_the_hardware_stations_force_limit_reads_the_reflex_monitor_and_the_meas
     context = controller.GetMyContextFromRoot(station.CreateDefaultContext())
     assert controller.GetInputPort("reflex_state").HasValue(context)
     assert controller.GetInputPort("robot_state").HasValue(context)
-    plain = make_station(_hardware_config(_scenario("open")), hardware=True, lcm=DrakeLcm("memq://"))
+    plain_config = _hardware_config(_scenario("open"))
+    plain_config.controller.force_limit.enabled = False
+    plain = make_station(plain_config, hardware=True, lcm=DrakeLcm("memq://"))
     assert plain.ee_controller.force_limit is None and not plain.ee_controller.HasInputPort("reflex_state")
