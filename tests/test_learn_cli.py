@@ -200,6 +200,10 @@ def test_evaluate_explore_reports_the_spread_of_exploratory_returns(learned, cap
     assert any(ran)
     assert all((r > 0.0) == ok and (ok or r == 0.0) for r, ok in zip(report["returns"], ran)), report
     assert main(["evaluate", "--skill-dir", str(shared["skill_dir"]), "--explore", "-1"]) == 2
+    assert report["approach_exploration"] == 1.0
+    assert main(["evaluate", "--skill-dir", str(shared["skill_dir"]), "--explore", "2",
+                 "--approach-exploration", "0"]) == 2
+    assert "approach_exploration (--approach-exploration): expected a factor in (0, 1]" in capsys.readouterr().err
 
 
 def test_learn_config_file_flags_override_it_and_print_config_shows_the_effect(tmp_path, capsys):

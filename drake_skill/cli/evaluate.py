@@ -73,6 +73,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--exploration-scale", type=float, default=None, metavar="S",
                         help=f"with --explore: sample from S x Sigma_0 (default: the skill's, as "
                              f"drake-skill learn: {exploration_scales_text()})")
+    parser.add_argument("--approach-exploration", type=float, default=1.0, metavar="F",
+                        help="with --explore: Sigma_0 x F on the bases before the demonstrations' first contact, "
+                             "as drake-skill learn (default 1: off; docs/method.md 5.4)")
     options.add_scenario(parser, "--station-config", what="the skill's scenario")
     parser.add_argument("--out", type=Path, default=None,
                         help="JSON report (default SKILL/evaluation.json); the placement plot goes beside it "
@@ -109,7 +112,8 @@ def run(args: argparse.Namespace) -> int:
         report = explore_skill(args.skill_dir, rollouts=args.explore, seed0=args.seed0, station_config=station,
                                rollout_config=rollout_config, workers=args.workers,
                                ray_address=args.ray_address, progress=not (args.quiet or args.json),
-                               exploration_scale=args.exploration_scale, keep=_keep_dir(args, "exploration.json"))
+                               exploration_scale=args.exploration_scale, keep=_keep_dir(args, "exploration.json"),
+                               approach_exploration=args.approach_exploration)
         out = args.out if args.out is not None else args.skill_dir / "exploration.json"
         atomic_write_json(out, report)
         plot = plot_outcomes_by_placement(report, _plot_path(out))

@@ -230,19 +230,21 @@ def save_fitted_skill(skill, skill_dir, *, overwrite: bool = False, station_conf
 def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0, station_config=None,
                   rollout_config=None, workers: int = 1, ray_address: str | None = None,
                   progress: bool = True, exploration_scale: float | None = None,
-                  keep: Path | None = None) -> dict[str, Any]:
+                  keep: Path | None = None, approach_exploration: float = 1.0) -> dict[str, Any]:
     """Exploratory rollouts of a fitted skill: what the first episode of policy search sees.
 
     Draws ``rollouts`` weight samples ``W ~ N(W_0, exploration_scale * Sigma_b^0)`` per basis
     (PI^2-ES-Cov's first ``ask``, seeded by ``seed0``; ``exploration_scale``
     None: the skill's, as ``learn``) and executes each on
-    the pose of seed ``seed0 + i``. Returns a JSON-able report: the returns
+    the pose of seed ``seed0 + i``; ``approach_exploration`` quiets the bases before the
+    demonstrations' first contact as ``learn`` does (docs/method.md 5.4). Returns a JSON-able report: the returns
     (learned dense reward; 0 for a failed rollout), their spread (min,
     median, max, standard deviation), ground-truth successes, final object
     states and failures by reason. With ``keep`` (a folder), the rollouts are kept in
     ``keep/rollouts/exploration.npz``.
     """
     from drake_skill.learning.config import valid_exploration_scale
+    from drake_skill.learning.exploration import approach_covariance, first_contact_time
     from drake_skill.learning.policy_search import make_policy_search
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec, make_pool
@@ -257,7 +259,13 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
         exploration_scale = float(skill.spec.exploration_scale)
     if not valid_exploration_scale(exploration_scale):
         raise ValueError(f"exploration_scale: expected a factor in (0, 100] on Sigma_b^0, got {exploration_scale!r}")
-    samples = make_policy_search("pi2-es-cov", skill.initial_weights, exploration_scale * skill.sigma0,
+    approach = float(approach_exploration)
+    if not (math.isfinite(approach) and 0.0 < approach <= 1.0):
+        raise ValueError(f"approach_exploration (--approach-exploration): expected a factor in (0, 1], got "
+                         f"{approach_exploration!r}; give 1 (off) or less")
+    sigma0 = approach_covariance(skill.sigma0, skill.dmps[skill.initial_index].tau, first_contact_time(skill),
+                                 approach)
+    samples = make_policy_search("pi2-es-cov", skill.initial_weights, exploration_scale * sigma0,
                                  seed=int(seed0)).ask(int(rollouts))
     seeds = [int(seed0) + i for i in range(int(rollouts))]
     start = time.perf_counter()
@@ -273,7 +281,8 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     if keep is not None:
         _keep_rollouts(keep, "exploration", results, spec)
     report = {"skill": skill.name, "skill_dir": str(Path(skill_dir)), "object_pose": rollout_config.object_pose,
-              "exploration_scale": float(exploration_scale), **results_report(seeds, results)}
+              "exploration_scale": float(exploration_scale), "approach_exploration": approach,
+              **results_report(seeds, results)}
     returns = np.array(report["returns"])
     report["return_spread"] = {"min": float(returns.min()), "median": float(np.median(returns)),
                                "max": float(returns.max()), "std": float(returns.std())}
