@@ -176,11 +176,11 @@ def _fmt(value, spec=".2f") -> str:
     return "-" if value is None else format(value, spec)
 
 
-def readme_text(summary: dict, rows, exploration: str = "basis") -> str:
+def readme_text(summary: dict, rows, exploration: str = "basis", approach_exploration: float = 1.0) -> str:
     """README.md: what ran, a line per skill, the criteria marked."""
     title, search = "`drake-skill learn`'s defaults", "PI^2-ES-Cov"
-    if exploration.startswith("basis "):
-        title = f"`drake-skill learn{exploration[len('basis'):]}`"
+    if approach_exploration != 1.0:
+        title = f"`drake-skill learn --approach-exploration {approach_exploration:g}`"
         search = "PI^2-ES-Cov, Sigma_b^0 quieted before the demonstrations' first contact (docs/method.md 5.4)"
     elif exploration != "basis":
         title = f"`drake-skill learn --exploration {exploration}`"
@@ -239,15 +239,13 @@ def _force_limit(out: Path, skill: str) -> bool | None:
     return bool(yaml_load_typed(schema=Scenario, data=station, defaults=Scenario()).controller.force_limit.enabled)
 
 
-def _exploration(out: Path) -> str:
-    """The study's ``exploration`` (grid.json; absent: "basis"), with ``--approach-exploration F``
-    appended when its runs had it."""
+def _exploration(out: Path) -> tuple[str, float]:
+    """The study's ``exploration`` and ``approach_exploration`` (grid.json; absent: "basis", 1)."""
     path = out / "grid.json"
     if not path.is_file():
-        return "basis"
+        return "basis", 1.0
     grid = load_json(path, "restore it from a copy, or rerun the study into another --out")
-    approach = grid.get("approach_exploration")
-    return str(grid.get("exploration", "basis")) + (f" --approach-exploration {approach:g}" if approach else "")
+    return str(grid.get("exploration", "basis")), float(grid.get("approach_exploration", 1.0))
 
 
 def write_report(out, rules: dict | None = None) -> list[Path]:
@@ -273,5 +271,5 @@ def write_report(out, rules: dict | None = None) -> list[Path]:
     summary = {"code": _code(runs), "skills": skills}
     paths = [atomic_write_text(out / "table.csv", _table_text(rows)),
              atomic_write_json(out / "summary.json", summary),
-             atomic_write_text(out / "README.md", readme_text(summary, rows, _exploration(out)))]
+             atomic_write_text(out / "README.md", readme_text(summary, rows, *_exploration(out)))]
     return [Path(p) for p in paths]

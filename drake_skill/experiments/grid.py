@@ -41,6 +41,7 @@ from typing import Any
 from drake_skill.fileio import atomic_write_json, load_json
 from drake_skill.inputs import scenario
 from drake_skill.learning.evaluation import HELD_OUT_SEED0
+from drake_skill.learning.config import valid_approach_exploration
 from drake_skill.learning.exploration import EXPLORATIONS
 from drake_skill.learning.loop import REWARDS, LearnConfig
 from drake_skill.learning.policy_search import METHODS
@@ -150,8 +151,7 @@ class GridConfig:
             raise ValueError(f"--select {self.select}: unknown rule; give last or guarded")
         if self.exploration not in EXPLORATIONS:
             raise ValueError(f"--exploration {self.exploration}: unknown; give {' or '.join(EXPLORATIONS)}")
-        approach = float(self.approach_exploration)
-        if not (0.0 < approach <= 1.0):
+        if not valid_approach_exploration(float(self.approach_exploration)):
             raise ValueError(f"--approach-exploration {self.approach_exploration}: expected a factor in (0, 1]; "
                              "give 1 (off) or less")
         if self.station not in ("thesis", "skill"):

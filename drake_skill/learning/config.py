@@ -30,6 +30,11 @@ def valid_exploration_scale(value) -> bool:
     return math.isfinite(value) and 0 < value <= 100
 
 
+def valid_approach_exploration(value) -> bool:
+    """An approach exploration factor is a finite factor in (0, 1] on Sigma_b^0 (docs/method.md 5.4)."""
+    return math.isfinite(value) and 0 < value <= 1
+
+
 
 @dc.dataclass
 class LearnConfig:
@@ -106,10 +111,9 @@ class LearnConfig:
             bad("select", self.select, "'guarded' (never return a policy that scores below the start) or 'last'")
         if self.exploration not in EXPLORATIONS:
             bad("exploration", self.exploration, "'basis' (thesis Eq. 5.3) or 'span' (the demonstrations' span)")
-        approach = float(self.approach_exploration)
-        if not (math.isfinite(approach) and 0.0 < approach <= 1.0):
+        if not valid_approach_exploration(float(self.approach_exploration)):
             bad("approach_exploration", self.approach_exploration, "a factor in (0, 1] on Sigma_b^0 (1: off)")
-        if approach != 1.0 and self.exploration != "basis":
+        if float(self.approach_exploration) != 1.0 and self.exploration != "basis":
             bad("approach_exploration", self.approach_exploration,
                 "1 with exploration span (the span has no bases to quiet), or exploration basis")
         if int(self.select_poses) < 1:

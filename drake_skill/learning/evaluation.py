@@ -243,8 +243,8 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     states and failures by reason. With ``keep`` (a folder), the rollouts are kept in
     ``keep/rollouts/exploration.npz``.
     """
-    from drake_skill.learning.config import valid_exploration_scale
-    from drake_skill.learning.exploration import approach_covariance, first_contact_time
+    from drake_skill.learning.config import valid_approach_exploration, valid_exploration_scale
+    from drake_skill.learning.exploration import skill_covariance
     from drake_skill.learning.policy_search import make_policy_search
     from drake_skill.learning.rollout import RolloutConfig
     from drake_skill.learning.workers import RunnerSpec, make_pool
@@ -260,12 +260,11 @@ def explore_skill(skill_dir, *, rollouts: int = 20, seed0: int = HELD_OUT_SEED0,
     if not valid_exploration_scale(exploration_scale):
         raise ValueError(f"exploration_scale: expected a factor in (0, 100] on Sigma_b^0, got {exploration_scale!r}")
     approach = float(approach_exploration)
-    if not (math.isfinite(approach) and 0.0 < approach <= 1.0):
+    if not valid_approach_exploration(approach):
         raise ValueError(f"approach_exploration (--approach-exploration): expected a factor in (0, 1], got "
                          f"{approach_exploration!r}; give 1 (off) or less")
-    sigma0 = approach_covariance(skill.sigma0, skill.dmps[skill.initial_index].tau, first_contact_time(skill),
-                                 approach)
-    samples = make_policy_search("pi2-es-cov", skill.initial_weights, exploration_scale * sigma0,
+    samples = make_policy_search("pi2-es-cov", skill.initial_weights,
+                                 exploration_scale * skill_covariance(skill, approach),
                                  seed=int(seed0)).ask(int(rollouts))
     seeds = [int(seed0) + i for i in range(int(rollouts))]
     start = time.perf_counter()

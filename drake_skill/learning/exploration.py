@@ -38,7 +38,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["APPROACH_MARGIN_S", "EXPLORATIONS", "SpanExploration", "approach_covariance", "first_contact_time"]
+__all__ = ["APPROACH_MARGIN_S", "EXPLORATIONS", "SpanExploration", "approach_covariance", "first_contact_time",
+           "skill_covariance"]
 
 #: ``LearnConfig.exploration``: "basis" (thesis Eq. 5.3: Sigma_b^0 per basis) or "span" (this module).
 EXPLORATIONS = ("basis", "span")
@@ -81,6 +82,13 @@ def approach_covariance(sigma0, tau: float, first_contact: float | None, factor:
     centres = np.linspace(0.0, float(tau), sigma0.shape[0])
     scale = np.where(centres <= float(first_contact) + float(margin), float(factor), 1.0)
     return sigma0 * scale[:, None, None]
+
+
+def skill_covariance(skill, approach_exploration: float = 1.0) -> np.ndarray:
+    """A fitted skill's Sigma_b^0 as the basis search starts from it: :func:`approach_covariance`
+    on its initial DMP's clock and first contact (``learn`` and ``evaluate --explore`` alike)."""
+    return approach_covariance(skill.sigma0, skill.dmps[skill.initial_index].tau, first_contact_time(skill),
+                               approach_exploration)
 
 
 class SpanExploration:

@@ -82,7 +82,7 @@ from drake_skill.learning.config import REWARDS, LearnConfig
 from drake_skill.learning.evaluation import HELD_OUT_SEED0, evaluate_greedy
 from drake_skill.learning.rollout_store import rollouts_path, save_rollouts
 from drake_skill.learning.run_report import write_run_report
-from drake_skill.learning.exploration import SpanExploration, approach_covariance, first_contact_time
+from drake_skill.learning.exploration import SpanExploration, skill_covariance
 from drake_skill.learning.plots import plot_learning_curve
 from drake_skill.learning.policy_search import PER_STEP_METHODS, make_policy_search
 from drake_skill.learning.runlog import RunLog, software_versions
@@ -249,9 +249,7 @@ class LearningRun:
         if self.span is not None:
             start, covariance = self.span.origin_theta(), self.span.initial_covariance()
         else:
-            start, covariance = self.skill.initial_weights, approach_covariance(
-                self.skill.sigma0, self.skill.dmps[self.skill.initial_index].tau,
-                first_contact_time(self.skill), config.approach_exploration)
+            start, covariance = self.skill.initial_weights, skill_covariance(self.skill, config.approach_exploration)
         search = make_policy_search(config.method, start, config.exploration_scale * covariance,
                                     **config.search_options())
         self.state = RunState(search)
